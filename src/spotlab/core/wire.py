@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from typing import Literal, Protocol
 
+from spotlab.core.frames import FrameBlock
+from spotlab.core.stats import LinkStats
+
 LinkEventKind = Literal[
     "open",
     "close",
@@ -35,3 +38,21 @@ class WireTap(Protocol):
 
     def on_event(self, stream: str, kind: LinkEventKind, detail: dict[str, object], t_ns: int) -> None:
         """A link event, with a JSON-safe detail dictionary."""
+
+
+class StreamDecoder(Protocol):
+    """Turns a device's received bytes into frames; the same object serves live and replay.
+
+    Attributes
+    ----------
+    stats : LinkStats
+        Counters of frames, losses, checksum errors and resyncs so far.
+    """
+
+    stats: LinkStats
+
+    def feed(self, data: bytes, arrival_ns: int) -> FrameBlock:
+        """Decode ``data`` (appended to what is buffered); return the complete frames, maybe none."""
+
+    def mark_discontinuity(self) -> None:
+        """The link was broken (reset, reconnect): do not join sequence numbers across it."""

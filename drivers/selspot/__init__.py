@@ -1,0 +1,1 @@
+"""Lateral-photodiode (SELSPOT-style) camera systems: SPX protocol over MCS-1."""

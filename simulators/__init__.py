@@ -1,0 +1,1 @@
+"""Byte-level device simulators, scene model, transports and fault injection."""

@@ -1,0 +1,1 @@
+"""Transports that carry simulated devices: sim:// URLs, pseudo-terminals, TCP."""

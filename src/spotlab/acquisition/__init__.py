@@ -1,0 +1,1 @@
+"""Acquisition: sessions of devices, sinks, recording and replay."""

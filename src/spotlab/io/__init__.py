@@ -1,0 +1,1 @@
+"""Recording journals and exchange files (C3D, TRC, calibration files)."""

@@ -1,0 +1,1 @@
+"""Conformance suites and pytest support for device families."""
