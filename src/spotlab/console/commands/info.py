@@ -1,0 +1,43 @@
+"""``spotlab info FILE``: what a recording holds, per stream."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from spotlab.acquisition.replay import summarize
+from spotlab.console.decoding import decoder_for
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "info",
+        help="summarise a recording: frames, losses, checksum errors, gaps, rate",
+        description="Decode a recording again and report, per stream, frames, lost frames, "
+        "checksum errors, resyncs, gaps, duration and measured rate.",
+    )
+    p.add_argument("file", type=Path, help="recording journal (.spj)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    summary = summarize(args.file, decoder_for)
+    data = summary.to_dict()
+    if args.json:
+        print(json.dumps(data))
+        return 0
+    print(f"{args.file}: {'complete' if data.get('complete') else 'incomplete (recording was cut)'}")
+    if data.get("truncated_bytes"):
+        print(f"  cut short: last {data['truncated_bytes']} bytes were a partial record")
+    if data.get("corrupt_records"):
+        print(f"  damaged records skipped: {data['corrupt_records']}")
+    for s in data["streams"]:
+        print(
+            f"  {s['name']}: {s['frames']} frames in {s['duration_s']:.3f} s "
+            f"({s['rate_hz']:.2f} Hz), lost {s['lost_frames']}, CRC errors {s['crc_errors']}, "
+            f"resyncs {s['resyncs']}, gaps {s['gaps']}"
+        )
+    return 0

@@ -1,0 +1,93 @@
+"""``spotlab sim FAMILY``: run a simulated device on a pseudo-terminal or TCP port."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+from spotlab.console.errors import CommandError
+from spotlab.simulators import service
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "sim",
+        help="run a simulated device (pseudo-terminal or TCP) until stopped",
+        description="Run a byte-level device simulator. With --pty the first line of stdout is "
+        "the device path to open; with --tcp it is a socket:// URL. It serves until stopped "
+        "(Ctrl-C, SIGTERM) or until --seconds have passed.",
+    )
+    p.add_argument("family", choices=["selspot"], help="device family")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--pty", action="store_true", help="serve on a real pseudo-terminal (default)")
+    where.add_argument(
+        "--tcp", nargs="?", const=0, type=int, metavar="PORT",
+        help="serve on 127.0.0.1:PORT (0 or omitted: any free port)",
+    )
+    p.add_argument("--cameras", type=int, default=2, help="cameras, 1-4 (default 2)")
+    p.add_argument("--leds", type=int, default=8, help="LEDs, 1-128 (default 8)")
+    p.add_argument("--rate", type=float, default=100.0, help="frame rate the scene is built for, Hz")
+    p.add_argument("--seed", type=int, default=0, help="seed of noise, motion and random faults")
+    p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
+    p.add_argument("--faults", default="", help="fault schedule, e.g. 'bitflip@1.5,drop@2,reset@6'")
+    p.add_argument("--fault-log", type=Path, help="write what was injected as JSON")
+    p.add_argument("--clock-offset", type=float, default=0.0, metavar="SECONDS")
+    p.add_argument("--clock-drift-ppm", type=float, default=0.0, metavar="PPM")
+    p.add_argument("--clock-jitter", type=float, default=0.0, metavar="SECONDS")
+    p.add_argument(
+        "--motion", default="wand",
+        help="wand, cluster, gait, or a C3D file whose markers move the LEDs",
+    )
+    p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
+    p.set_defaults(run=run)
+
+
+def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
+    """Simulator options from parsed command-line arguments."""
+    if not 1 <= args.cameras <= 4:
+        raise CommandError(f"--cameras must be 1 to 4, got {args.cameras}")
+    if not 1 <= args.leds <= 128:
+        raise CommandError(f"--leds must be 1 to 128, got {args.leds}")
+    if not args.rate > 0:
+        raise CommandError(f"--rate must be positive, got {args.rate}")
+    motion = args.motion
+    if motion not in ("wand", "cluster", "gait"):
+        path = Path(motion)
+        if not path.is_file():
+            raise CommandError(f"--motion {motion!r} is neither wand, cluster, gait nor a C3D file")
+    return service.SelspotSimOptions(
+        cameras=args.cameras,
+        leds=args.leds,
+        rate_hz=args.rate,
+        seed=args.seed,
+        truth=args.truth,
+        fault_log=args.fault_log,
+        faults=args.faults,
+        clock_offset_s=args.clock_offset,
+        clock_drift_ppm=args.clock_drift_ppm,
+        clock_jitter_s=args.clock_jitter,
+        motion=motion,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    options = options_from_args(args)
+    stop = threading.Event()
+
+    def _stop(signum: int, frame: object) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    server = service.serve_tcp(options, port=args.tcp) if args.tcp is not None else service.serve_pty(options)
+    try:
+        print(server.url if args.tcp is not None else server.path, flush=True)
+        stop.wait(args.seconds)
+    finally:
+        server.stop()
+    sys.stdout.flush()
+    return 0
