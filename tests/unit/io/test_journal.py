@@ -111,7 +111,7 @@ def test_refuses_to_overwrite(tmp_path: Path) -> None:
 
 
 def test_cannot_create_names_the_cause(tmp_path: Path) -> None:
-    with pytest.raises(RecordingError, match="cannot create journal .*No such file"):
+    with pytest.raises(RecordingError, match=r"cannot create journal .*No such file"):
         JournalWriter(tmp_path / "missing" / "run.spj", {})
 
 
@@ -187,7 +187,7 @@ def test_damaged_length_field_and_garbage_between_records(tmp_path: Path) -> Non
 
 
 def test_truncated_at_every_byte_offset(tmp_path: Path) -> None:
-    """A journal cut anywhere after its header opens; every complete record before the cut is read."""
+    """A journal cut anywhere after its header opens with every complete record before the cut."""
     full_path = tmp_path / "full.spj"
     _write_small(full_path)
     full = full_path.read_bytes()
@@ -254,8 +254,7 @@ def test_golden_record_bytes() -> None:
     assert encode_file_header().hex(" ") == "89 53 50 4f 54 4a 52 0a 01 00 00 00 96 63 85 5d"
     rec = encode_record(RecordType.RX, 0, 1_000_000_000, b"\x01\x02\x03")
     assert rec.hex(" ") == (
-        "a5 53 4a 52 02 00 00 00 03 00 00 00 00 ca 9a 3b 00 00 00 00 "
-        "1c 81 ad b7 01 02 03"
+        "a5 53 4a 52 02 00 00 00 03 00 00 00 00 ca 9a 3b 00 00 00 00 1c 81 ad b7 01 02 03"
     )
     assert struct.unpack_from("<I", rec, 20)[0] == zlib.crc32(rec[:20] + rec[24:])
 

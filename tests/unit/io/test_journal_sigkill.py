@@ -40,7 +40,7 @@ ALLOWED_LOSS_NS = 100_000_000
 
 
 def _read_until(fd: int, buf: bytearray, until: float, stop_at: bytes | None = None) -> bool:
-    """Read the child's output until ``until`` (monotonic s) or ``stop_at`` appears; False at EOF."""
+    """Read the child's output until ``until`` (monotonic s) or ``stop_at``; False at EOF."""
     while time.monotonic() < until:
         if stop_at is not None and stop_at in buf:
             return True

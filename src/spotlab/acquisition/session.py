@@ -1,0 +1,451 @@
+"""A session of devices and sinks, in the style of python-can's ``Notifier``.
+
+One reader thread per device (``spotlab-reader-<name>``) loops on
+``device.recv(timeout)`` and offers every block to every sink through a
+bounded queue per sink, each drained by its own dispatcher thread
+(``spotlab-sink-<name>``). A slow sink never slows the readers or the other
+sinks: when its queue is full the block is dropped *for that sink only* and
+counted (:meth:`Session.sink_stats`). Raw bytes are recorded by taps on the
+devices (see :class:`~spotlab.acquisition.recorder.Recorder`), never through
+these queues, so a recording loses nothing to back-pressure.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+from spotlab.acquisition._channel import SinkChannel, SinkStats
+from spotlab.acquisition.interfaces import Device, Sink, SinkBase
+from spotlab.core.errors import (
+    ConfigurationError,
+    DeviceDisconnected,
+    DeviceTimeout,
+    ProtocolError,
+    SpotlabError,
+)
+from spotlab.core.wire import WireTap
+
+__all__ = [
+    "Device",
+    "DeviceErrorRecord",
+    "Session",
+    "SessionStatus",
+    "Sink",
+    "SinkBase",
+    "SinkStats",
+    "default_is_fatal",
+]
+
+log = logging.getLogger(__name__)
+
+_TRANSIENT = (ProtocolError, DeviceTimeout, DeviceDisconnected)
+
+
+def default_is_fatal(exc: BaseException) -> bool:
+    """Whether a device error ends its reader thread.
+
+    Protocol errors, timeouts and disconnections are transient (the driver
+    resynchronises or reconnects, the reader keeps calling ``recv``);
+    anything else — a device refusing to work, a bug — is fatal.
+    """
+    return not isinstance(exc, _TRANSIENT)
+
+
+@dataclass(frozen=True)
+class DeviceErrorRecord:
+    """An error a device raised in ``recv``.
+
+    Attributes
+    ----------
+    stream : str
+        The device's name.
+    error : BaseException
+        What it raised.
+    t_ns : int
+        Host monotonic time when it was caught.
+    fatal : bool
+        Whether it ended the device's reader thread.
+    """
+
+    stream: str
+    error: BaseException
+    t_ns: int
+    fatal: bool
+
+
+@dataclass(frozen=True)
+class SessionStatus:
+    """A snapshot for progress displays.
+
+    Attributes
+    ----------
+    elapsed_s : float
+        Seconds since the session started.
+    target_s : float or None
+        Planned duration (``run_for``), None when open-ended.
+    frames : dict of str to int
+        Frames received per stream.
+    overflows : dict of str to int
+        Blocks dropped per sink because its queue was full.
+    errors : int
+        Device errors so far.
+    readers_alive : int
+        Reader threads still running (a fatal error ends one).
+    """
+
+    elapsed_s: float
+    target_s: float | None
+    frames: dict[str, int]
+    overflows: dict[str, int]
+    errors: int
+    readers_alive: int
+
+
+def _is_tap(obj: object) -> bool:
+    return all(callable(getattr(obj, m, None)) for m in ("on_rx", "on_tx", "on_event"))
+
+
+def _sink_names(sinks: Sequence[Sink]) -> list[str]:
+    names: list[str] = []
+    for sink in sinks:
+        base = str(getattr(sink, "name", "") or type(sink).__name__)
+        name, k = base, 2
+        while name in names:
+            name, k = f"{base}#{k}", k + 1
+        names.append(name)
+    return names
+
+
+class Session:
+    """Read several devices at once and feed their blocks to sinks.
+
+    Parameters
+    ----------
+    devices : sequence of Device
+        Devices with distinct names. The session starts and stops them.
+    sinks : sequence of Sink
+        Consumers. A sink that is also a :class:`~spotlab.core.wire.WireTap`
+        (the recorder) is registered on every device with ``add_tap`` at
+        :meth:`start`; do not register it yourself as well.
+    queue_size : int, optional
+        Blocks that may wait for each sink (default 256); more are dropped
+        for that sink and counted.
+    recv_timeout_s : float, optional
+        Timeout of each ``recv`` call (default 0.1 s): how quickly readers see
+        :meth:`stop`.
+    is_fatal : callable, optional
+        Decides whether a device error ends its reader (default
+        :func:`default_is_fatal`). Every error is recorded and delivered to
+        the sinks' ``on_error`` either way.
+    close_devices : bool, optional
+        Also ``close()`` the devices when the session stops (default False:
+        whoever created them closes them).
+
+    Raises
+    ------
+    ConfigurationError
+        If there is no device, two devices share a name, or ``queue_size`` < 1.
+
+    Examples
+    --------
+    >>> with Session([camera, timer], [recorder, monitor]) as session:  # doctest: +SKIP
+    ...     session.run_for(10.0, progress=print)
+    """
+
+    def __init__(
+        self,
+        devices: Sequence[Device],
+        sinks: Sequence[Sink] = (),
+        queue_size: int = 256,
+        *,
+        recv_timeout_s: float = 0.1,
+        is_fatal: Callable[[BaseException], bool] = default_is_fatal,
+        close_devices: bool = False,
+    ) -> None:
+        self.devices = list(devices)
+        self.sinks = list(sinks)
+        if not self.devices:
+            raise ConfigurationError("a session needs at least one device")
+        names = [d.name for d in self.devices]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ConfigurationError(f"device names must be unique in a session: {dupes} repeat")
+        if queue_size < 1:
+            raise ConfigurationError(f"queue_size must be at least 1, got {queue_size}")
+        if not recv_timeout_s > 0:
+            raise ConfigurationError(f"recv_timeout_s must be positive, got {recv_timeout_s}")
+        self._recv_timeout = recv_timeout_s
+        self._is_fatal = is_fatal
+        self._close_devices = close_devices
+        self._channels = [SinkChannel(n, queue_size) for n in _sink_names(self.sinks)]
+        self._frames = dict.fromkeys(names, 0)
+        self._errors: deque[DeviceErrorRecord] = deque(maxlen=1000)
+        self._n_errors = 0
+        self._lock = threading.Lock()
+        self._state = "new"
+        self._stop_event = threading.Event()
+        self._started: list[Device] = []
+        self._readers: list[threading.Thread] = []
+        self._dispatchers: list[threading.Thread] = []
+        self._t0 = time.monotonic()
+        self._target_s: float | None = None
+        self._t_stop: float | None = None
+
+    # -- life cycle -------------------------------------------------------------
+    def start(self) -> None:
+        """Register taps, start the devices, call sinks' ``on_start``, start the threads.
+
+        If anything fails, whatever was started is stopped again and the error
+        is raised.
+
+        Raises
+        ------
+        ConfigurationError
+            If the session was already started (a session runs once).
+        """
+        with self._lock:
+            if self._state != "new":
+                raise ConfigurationError(f"a session runs once; this one is {self._state}")
+            self._state = "starting"
+        try:
+            for sink in self.sinks:
+                if _is_tap(sink):
+                    tap: WireTap = sink  # type: ignore[assignment]
+                    for device in self.devices:
+                        device.add_tap(tap)
+            for device in self.devices:
+                device.start()
+                self._started.append(device)
+            for sink in self.sinks:
+                hook = getattr(sink, "on_start", None)
+                if callable(hook):
+                    hook(list(self.devices))
+            for sink, channel in zip(self.sinks, self._channels, strict=True):
+                self._spawn(
+                    self._dispatchers, self._dispatch, (sink, channel), channel.name, "sink"
+                )
+            self._t0 = time.monotonic()
+            for device in self.devices:
+                self._spawn(self._readers, self._read, (device,), device.name, "reader")
+        except BaseException:
+            self._shutdown(raise_errors=False)
+            raise
+        with self._lock:
+            if self._state == "starting":  # not stopped meanwhile by another thread
+                self._state = "running"
+
+    def stop(self) -> None:
+        """Stop readers and devices, deliver what is queued, join every thread, stop sinks.
+
+        Safe to call twice. Errors raised by devices' ``stop``/``close`` and
+        sinks' ``stop`` do not interrupt the shutdown; the first is raised at
+        the end (a recorder that could not write raises here).
+        """
+        self._shutdown(raise_errors=True)
+
+    def __enter__(self) -> Session:
+        self.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        # An error in the body is the one worth seeing; don't mask it.
+        self._shutdown(raise_errors=exc is None)
+
+    def run_for(
+        self,
+        seconds: float,
+        progress: Callable[[SessionStatus], Any] | None = None,
+        *,
+        progress_interval_s: float = 0.5,
+    ) -> SessionStatus:
+        """Run for ``seconds`` (starting if needed), then stop.
+
+        Parameters
+        ----------
+        seconds : float
+            How long to acquire.
+        progress : callable, optional
+            Called with a :class:`SessionStatus` every ``progress_interval_s``
+            and once at the end, from the calling thread.
+        progress_interval_s : float, optional
+            Seconds between progress calls (default 0.5).
+
+        Returns
+        -------
+        SessionStatus
+            The state at the end, after every block was delivered.
+
+        Notes
+        -----
+        Ends early when every reader thread has ended (fatal errors) or
+        another thread calls :meth:`stop`.
+        """
+        if self._state == "new":
+            self.start()
+        self._target_s = float(seconds)
+        end = time.monotonic() + seconds
+        try:
+            while True:
+                remaining = end - time.monotonic()
+                if remaining <= 0 or not any(t.is_alive() for t in self._readers):
+                    break
+                if self._stop_event.wait(min(progress_interval_s, remaining)):
+                    break
+                if progress is not None:
+                    progress(self.status())
+        finally:
+            self.stop()
+        final = self.status()
+        if progress is not None:
+            progress(final)
+        return final
+
+    # -- what happened ------------------------------------------------------------
+    def status(self) -> SessionStatus:
+        """A snapshot of frames, overflows and errors."""
+        return SessionStatus(
+            elapsed_s=0.0
+            if self._state == "new"
+            else (self._t_stop or time.monotonic()) - self._t0,
+            target_s=self._target_s,
+            frames=dict(self._frames),
+            overflows=self.overflows,
+            errors=self._n_errors,
+            readers_alive=sum(t.is_alive() for t in self._readers),
+        )
+
+    @property
+    def frames(self) -> dict[str, int]:
+        """Frames received per stream."""
+        return dict(self._frames)
+
+    @property
+    def overflows(self) -> dict[str, int]:
+        """Blocks dropped per sink because its queue was full."""
+        return {c.name: c.overflows for c in self._channels}
+
+    def sink_stats(self) -> dict[str, SinkStats]:
+        """Delivery counters per sink."""
+        return {c.name: c.stats() for c in self._channels}
+
+    @property
+    def errors(self) -> list[DeviceErrorRecord]:
+        """Device errors, oldest first (the last 1000)."""
+        with self._lock:
+            return list(self._errors)
+
+    # -- threads ----------------------------------------------------------------------
+    def _spawn(
+        self,
+        into: list[threading.Thread],
+        target: Callable[..., None],
+        args: tuple[Any, ...],
+        name: str,
+        role: str,
+    ) -> None:
+        thread = threading.Thread(
+            target=target, args=args, name=f"spotlab-{role}-{name}", daemon=True
+        )
+        into.append(thread)
+        thread.start()
+
+    def _read(self, device: Device) -> None:
+        name = device.name
+        stop = self._stop_event
+        channels = self._channels
+        while not stop.is_set():
+            try:
+                block = device.recv(timeout=self._recv_timeout)
+            except Exception as exc:
+                fatal = bool(self._is_fatal(exc))
+                self._note_error(name, exc, fatal)
+                for channel in channels:
+                    channel.put_error(name, exc)
+                if fatal:
+                    log.error("device %s stopped on a fatal error: %s", name, exc)
+                    return
+                stop.wait(self._recv_timeout)  # do not spin on a failing device
+                continue
+            if block is None or not len(block):
+                continue
+            self._frames[name] += len(block)
+            for channel in channels:
+                channel.put_block(name, block)
+
+    def _note_error(self, stream: str, exc: BaseException, fatal: bool) -> None:
+        with self._lock:
+            self._errors.append(DeviceErrorRecord(stream, exc, time.monotonic_ns(), fatal))
+            self._n_errors += 1
+        if not isinstance(exc, SpotlabError):
+            log.warning("device %s raised %r", stream, exc)
+
+    def _dispatch(self, sink: Sink, channel: SinkChannel) -> None:
+        while (item := channel.get()) is not None:
+            stream, payload = item
+            try:
+                if isinstance(payload, BaseException):
+                    channel.errors_delivered += 1
+                    sink.on_error(stream, payload)
+                else:
+                    channel.delivered += 1
+                    sink.on_block(stream, payload)
+            except Exception:
+                channel.sink_errors += 1
+                if channel.sink_errors <= 3:
+                    log.exception("sink %s failed on a %s item", channel.name, stream)
+
+    def _shutdown(self, *, raise_errors: bool) -> None:
+        with self._lock:
+            if self._state in ("stopping", "stopped"):
+                return
+            self._state = "stopping"
+        errors: list[BaseException] = []
+        self._stop_event.set()
+        self._t_stop = time.monotonic()
+        me = threading.current_thread()
+        for thread in self._readers:
+            if thread is not me:
+                thread.join(timeout=10 * self._recv_timeout + 5.0)
+                if thread.is_alive():
+                    errors.append(
+                        ConfigurationError(f"{thread.name} did not return from recv; left running")
+                    )
+        for device in self._started:
+            self._collect(errors, device.stop)
+        for channel in self._channels:
+            channel.close()
+        for thread in self._dispatchers:
+            if thread is not me:
+                thread.join()
+        if self._close_devices:
+            for device in self.devices:
+                self._collect(errors, device.close)
+        for sink in self.sinks:
+            self._collect(errors, sink.stop)
+        with self._lock:
+            self._state = "stopped"
+        for extra in errors[1:]:
+            log.error("also while stopping the session: %s", extra)
+        if errors and raise_errors:
+            raise errors[0]
+        if errors:
+            log.error("while stopping the session: %s", errors[0])
+
+    @staticmethod
+    def _collect(errors: list[BaseException], call: Callable[[], Any]) -> None:
+        try:
+            call()
+        except Exception as exc:
+            errors.append(exc)
