@@ -1,0 +1,93 @@
+"""``spotlab devices``: serial ports on this machine and the devices that answer on them."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from serial.tools import list_ports
+
+from spotlab.drivers import available_families, load_driver
+
+BY_ID = Path("/dev/serial/by-id")
+SPOTLAB_LINKS = Path("/dev/spotlab")
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "devices",
+        help="list serial ports and, with --probe, the devices that answer on them",
+        description="List serial ports (with their stable /dev/serial/by-id and /dev/spotlab "
+        "links). With --probe, ask every driver family to detect its devices; probing sends "
+        "a reset and a version query to each port, so leave it off while another program "
+        "uses a port.",
+    )
+    p.add_argument("--probe", action="store_true", help="ask each driver family to detect devices")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(run=run)
+
+
+def _stable_links() -> dict[str, list[str]]:
+    """Map of real device path -> stable symlinks pointing at it."""
+    links: dict[str, list[str]] = {}
+    for folder in (SPOTLAB_LINKS, BY_ID):
+        if not folder.is_dir():
+            continue
+        for link in sorted(folder.iterdir()):
+            try:
+                links.setdefault(str(link.resolve()), []).append(str(link))
+            except OSError:
+                continue
+    return links
+
+
+def list_serial_ports() -> list[dict[str, Any]]:
+    """Serial ports as dictionaries: device, stable links, USB ids, serial number, description."""
+    links = _stable_links()
+    ports = []
+    for info in sorted(list_ports.comports(), key=lambda p: p.device):
+        ports.append(
+            {
+                "device": info.device,
+                "links": links.get(str(Path(info.device).resolve()), []),
+                "vid": f"{info.vid:04x}" if info.vid is not None else None,
+                "pid": f"{info.pid:04x}" if info.pid is not None else None,
+                "serial_number": info.serial_number,
+                "description": info.description,
+            }
+        )
+    return ports
+
+
+def run(args: argparse.Namespace) -> int:
+    result: dict[str, Any] = {"serial_ports": list_serial_ports(), "devices": []}
+    if args.probe:
+        for family in available_families():
+            for dev in load_driver(family).detect():
+                result["devices"].append(
+                    {
+                        "family": dev.family,
+                        "port": dev.port,
+                        "description": dev.description,
+                        "serial_number": dev.serial_number,
+                        **({"extra": dev.extra} if dev.extra else {}),
+                    }
+                )
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    if not result["serial_ports"]:
+        print("no serial ports found")
+    for port in result["serial_ports"]:
+        ids = f" [{port['vid']}:{port['pid']}]" if port["vid"] else ""
+        print(f"{port['device']}{ids} {port['description'] or ''}".rstrip())
+        for link in port["links"]:
+            print(f"    {link}")
+    if args.probe:
+        if not result["devices"]:
+            print("no device answered")
+        for dev in result["devices"]:
+            print(f"{dev['family']} at {dev['port']}: {dev['description']}")
+    return 0
