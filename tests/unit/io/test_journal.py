@@ -257,6 +257,14 @@ def test_golden_record_bytes() -> None:
         "a5 53 4a 52 02 00 00 00 03 00 00 00 00 ca 9a 3b 00 00 00 00 1c 81 ad b7 01 02 03"
     )
     assert struct.unpack_from("<I", rec, 20)[0] == zlib.crc32(rec[:20] + rec[24:])
+    meta = encode_record(RecordType.META, 0, 1000, b'{"name":"cam","metadata":{"family":"toy"}}')
+    assert meta[:24].hex(" ") == (
+        "a5 53 4a 52 01 00 00 00 2a 00 00 00 e8 03 00 00 00 00 00 00 4b 2f 90 49"
+    )
+    event = encode_record(RecordType.EVENT, 0, 2 * 10**9, b'{"kind":"disconnected","detail":{}}')
+    assert event[:24].hex(" ") == (
+        "a5 53 4a 52 04 00 00 00 23 00 00 00 00 94 35 77 00 00 00 00 0f bc 76 b4"
+    )
 
 
 def test_large_file_is_read_in_chunks(tmp_path: Path) -> None:
