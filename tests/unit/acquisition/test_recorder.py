@@ -30,7 +30,10 @@ def test_recorder_keeps_every_byte_while_a_slow_sink_overflows(tmp_path: Path) -
     session = Session([cam, timer], [recorder, slow], queue_size=2)
     session.run_for(0.3)
     assert session.overflows["slow"] > 0
-    assert session.overflows["recorder"] == 0
+    # The recorder's own block queue may overflow too (it only counts frames
+    # there); its bytes come from the taps, so the journal holds them all.
+    rec_stats = session.sink_stats()["recorder"]
+    assert sum(recorder.frames.values()) + rec_stats.dropped_frames == sum(session.frames.values())
 
     for device in (cam, timer):
         assert b"".join(_records(path, device.name, RecordType.RX)) == b"OKAY\r" + bytes(
@@ -48,7 +51,6 @@ def test_recorder_keeps_every_byte_while_a_slow_sink_overflows(tmp_path: Path) -
     assert ("cam", "started") in kinds and ("cam", "stopped") in kinds
     final = {s: e["detail"] for s, e in events if e["kind"] == "link_stats"}
     assert final == {"cam": cam.stats.as_dict(), "timer": timer.stats.as_dict()}
-    assert recorder.frames == session.frames
     # The stopped events come before link_stats, which come before END.
     order = [e["kind"] for s, e in events if s == "cam"]
     assert order.index("stopped") < order.index("link_stats")
