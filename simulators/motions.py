@@ -1,0 +1,394 @@
+"""Marker (LED) trajectories: generated motions and replay of real C3D recordings.
+
+Every motion answers one vectorised question, :meth:`Motion.sample`: where was
+marker ``markers[i]`` at time ``times[i]``? A time-multiplexed device samples
+each LED at its own slot time, so positions are asked per (time, marker) pair.
+World frame: mm, z up, floor at z = 0, the capture volume around (0, 0, 900).
+NaN means the marker does not exist at that moment (missing in a C3D file);
+the device reports it as not seen.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+MOTIONS = ("wand", "cluster", "gait")
+
+
+class Motion(ABC):
+    """Trajectories of ``n_markers`` markers.
+
+    Attributes
+    ----------
+    n_markers : int
+        Number of markers; marker ``i`` is carried by LED id ``i``.
+    labels : tuple of str
+        One label per marker.
+    """
+
+    n_markers: int
+    labels: tuple[str, ...]
+
+    @abstractmethod
+    def sample(self, times: F64, markers: I64) -> F64:
+        """Positions of ``markers`` (K,) at ``times`` (K,) seconds -> (K, 3) mm, NaN if missing."""
+
+    def positions(self, t: float) -> F64:
+        """All markers at one time ``t`` seconds -> (M, 3) mm."""
+        m = np.arange(self.n_markers, dtype=np.int64)
+        return self.sample(np.full(self.n_markers, float(t)), m)
+
+
+class StaticMarkers(Motion):
+    """Markers that do not move, e.g. an L-frame on the floor, shape (M, 3) mm."""
+
+    def __init__(self, points: npt.ArrayLike, labels: Sequence[str] | None = None) -> None:
+        self.points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        self.n_markers = self.points.shape[0]
+        self.labels = tuple(labels) if labels else tuple(f"S{i}" for i in range(self.n_markers))
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        return self.points[np.asarray(markers, dtype=np.int64)].copy()
+
+
+def reference_markers(n: int, seed: int = 0) -> StaticMarkers:
+    """``n`` static markers: an L-frame on the floor first, then points scattered in the volume.
+
+    The L-frame's four markers sit 10 mm above the floor at (0, 0), (200, 0),
+    (600, 0) and (0, 400) mm: the unequal spacing tells its axes apart.
+    """
+    lframe = np.array([[0, 0, 10], [200, 0, 10], [600, 0, 10], [0, 400, 10]], dtype=np.float64)
+    labels = ["LF_O", "LF_X1", "LF_X2", "LF_Y"]
+    pts = lframe[: min(n, 4)]
+    if n > 4:
+        rng = np.random.default_rng(np.random.SeedSequence([seed, 0x57A7]))
+        extra = rng.uniform([-800, -800, 200], [800, 800, 1600], size=(n - 4, 3))
+        pts = np.vstack([pts, extra])
+        labels += [f"S{i}" for i in range(n - 4)]
+    return StaticMarkers(pts, labels[:n])
+
+
+class Concat(Motion):
+    """Markers of several motions side by side: marker ids run through them in order."""
+
+    def __init__(self, parts: Sequence[Motion]) -> None:
+        self.parts = [p for p in parts if p.n_markers > 0]
+        sizes = [p.n_markers for p in self.parts]
+        self._starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.n_markers = int(self._starts[-1])
+        self.labels = tuple(lab for p in self.parts for lab in p.labels)
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        m = np.asarray(markers, dtype=np.int64)
+        out = np.full((m.size, 3), np.nan)
+        part = np.searchsorted(self._starts, m, side="right") - 1
+        for j, p in enumerate(self.parts):
+            rows = part == j
+            if rows.any():
+                out[rows] = p.sample(np.asarray(times)[rows], m[rows] - self._starts[j])
+        return out
+
+
+class Subset(Motion):
+    """The first ``n`` markers of another motion."""
+
+    def __init__(self, motion: Motion, n: int) -> None:
+        self.motion = motion
+        self.n_markers = min(n, motion.n_markers)
+        self.labels = motion.labels[: self.n_markers]
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        return self.motion.sample(times, markers)
+
+
+class WandDance(Motion):
+    """Two LEDs ``length`` mm apart on a wand waved through the volume.
+
+    The wand centre follows a sum of slow sines inside ``centre +- extent``;
+    the wand turns about the vertical and tilts up and down, so that it covers
+    many directions. Marker 0 and 1 are the wand ends.
+    """
+
+    def __init__(
+        self,
+        length: float = 500.0,
+        centre: tuple[float, float, float] = (0.0, 0.0, 1000.0),
+        extent: tuple[float, float, float] = (800.0, 800.0, 450.0),
+        seed: int = 0,
+    ) -> None:
+        rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3A4D]))
+        self.length = float(length)
+        self.centre = np.asarray(centre, dtype=np.float64)
+        self.extent = np.asarray(extent, dtype=np.float64)
+        self._freq = rng.uniform(0.06, 0.25, size=(2, 3))  # Hz, two sines per axis
+        self._phase = rng.uniform(0, 2 * np.pi, size=(2, 3))
+        self._yaw_rate = rng.uniform(0.5, 0.9) * rng.choice([-1.0, 1.0])  # rad/s
+        self._tilt = (rng.uniform(0.2, 0.4), rng.uniform(0, 2 * np.pi))  # Hz, phase
+        self.n_markers = 2
+        self.labels = ("WAND_A", "WAND_B")
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        t = np.asarray(times, dtype=np.float64)[:, None]
+        w = 2 * np.pi * self._freq
+        wave = 0.6 * np.sin(w[0] * t + self._phase[0]) + 0.4 * np.sin(w[1] * t + self._phase[1])
+        c = self.centre + self.extent * wave
+        yaw = self._yaw_rate * t[:, 0] + 0.5 * np.sin(0.31 * t[:, 0])
+        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t[:, 0] + self._tilt[1])
+        d = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
+        sign = np.where(np.asarray(markers) == 0, -0.5, 0.5)[:, None]
+        return np.asarray(c + sign * self.length * d)
+
+
+def _rotations(axis: F64, angle: F64) -> F64:
+    """Rodrigues: unit axes (K, 3) and angles (K,) rad -> rotation matrices (K, 3, 3)."""
+    k = axis / np.linalg.norm(axis, axis=1, keepdims=True)
+    K = np.zeros((k.shape[0], 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+class RigidClusters(Motion):
+    """Rigid clusters of ``cluster_size`` markers, each translating and rotating on its own.
+
+    Cluster ``j`` holds markers ``j * cluster_size ...``; its shape is a fixed,
+    asymmetric set of points within about 100 mm; its centre loops through
+    the volume and it turns about a slowly precessing axis.
+    """
+
+    def __init__(self, n_markers: int = 8, cluster_size: int = 4, seed: int = 0) -> None:
+        if cluster_size < 3:
+            raise ValueError("a rigid cluster needs at least 3 markers")
+        rng = np.random.default_rng(np.random.SeedSequence([seed, 0xC1A5]))
+        self.cluster_size = cluster_size
+        self.n_markers = n_markers
+        n_clusters = -(-n_markers // cluster_size)
+        base = np.array([[0, 0, 0], [80, 0, 0], [0, 60, 0], [30, 30, 45]], dtype=np.float64)
+        if cluster_size > 4:
+            base = np.vstack([base, rng.uniform(-50, 50, size=(cluster_size - 4, 3))])
+        self.shape = (base[:cluster_size] - base[:cluster_size].mean(0)).copy()
+        self._freq = rng.uniform(0.05, 0.2, size=(n_clusters, 3))
+        self._phase = rng.uniform(0, 2 * np.pi, size=(n_clusters, 3))
+        self._spin = rng.uniform(0.4, 1.5, size=n_clusters) * rng.choice([-1, 1], n_clusters)
+        self._axis = rng.normal(size=(n_clusters, 3))
+        self.labels = tuple(f"C{i // cluster_size}_{i % cluster_size}" for i in range(n_markers))
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        t = np.asarray(times, dtype=np.float64)
+        m = np.asarray(markers, dtype=np.int64)
+        j, local = m // self.cluster_size, m % self.cluster_size
+        amp = np.array([700.0, 700.0, 400.0])
+        centre = np.array([0.0, 0.0, 1000.0]) + amp * np.sin(
+            2 * np.pi * self._freq[j] * t[:, None] + self._phase[j]
+        )
+        axis = self._axis[j] + 0.5 * np.stack([np.sin(0.2 * t), np.cos(0.17 * t), 0 * t], 1)
+        R = _rotations(axis, self._spin[j] * t)
+        return np.asarray(centre + np.einsum("kij,kj->ki", R, self.shape[local]))
+
+
+GAIT_LABELS = (
+    "HEAD", "C7", "LSHO", "RSHO", "LELB", "RELB", "LWRA", "RWRA", "LASI", "RASI",
+    "SACR", "LKNE", "RKNE", "LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE",
+)  # fmt: skip
+
+
+class Gait(Motion):
+    """A body walking on a circle of ``radius`` mm at ``speed`` m/s, with 19 surface markers.
+
+    A sagittal-plane model: hip, knee and arm angles follow the gait phase, the
+    pelvis bobs twice per stride, left and right are half a stride apart. Labels
+    are Plug-in-Gait-like (``GAIT_LABELS``).
+    """
+
+    def __init__(self, speed: float = 1.2, radius: float = 1200.0, stride_hz: float = 0.9) -> None:
+        self.speed = speed * 1000.0
+        self.radius = radius
+        self.stride_hz = stride_hz
+        self.n_markers = len(GAIT_LABELS)
+        self.labels = GAIT_LABELS
+
+    def _all(self, t: F64) -> F64:
+        """All 19 markers at times (K,) -> (K, 19, 3) mm."""
+        a = self.speed * t / self.radius
+        base = np.stack([self.radius * np.cos(a), self.radius * np.sin(a)], 1)
+        fwd = np.stack([-np.sin(a), np.cos(a)], 1)
+        left = -np.stack([np.cos(a), np.sin(a)], 1)
+        ph = 2 * np.pi * self.stride_hz * t
+        pel_z = 950.0 + 15.0 * np.cos(2 * ph)
+        cols: dict[str, tuple[F64, F64, F64]] = {}  # (forward, left, up) in mm
+        zero = np.zeros_like(t)
+        for side, lat, p in (("L", 1.0, ph), ("R", -1.0, ph + np.pi)):
+            hip = 0.4 * np.sin(p)
+            knee = 0.55 * (1 - np.cos(p + 0.6)) / 2
+            kf, ku = 450 * np.sin(hip), pel_z - 80 - 450 * np.cos(hip)
+            shank = hip - knee
+            af, au = kf + 430 * np.sin(shank), ku - 430 * np.cos(shank)
+            foot = 0.5 * shank
+            cols[side + "KNE"] = (kf, lat * 95 + zero, ku)
+            cols[side + "ANK"] = (af, lat * 90 + zero, au)
+            cols[side + "HEE"] = (
+                af - 50 * np.cos(foot),
+                lat * 90 + zero,
+                au - 40 + 50 * np.sin(foot),
+            )
+            cols[side + "TOE"] = (
+                af + 140 * np.cos(foot),
+                lat * 85 + zero,
+                au - 50 - 140 * np.sin(foot),
+            )
+            arm = -0.35 * np.sin(p)
+            sh_u = pel_z + 480
+            ef, eu = 300 * np.sin(arm), sh_u - 300 * np.cos(arm)
+            cols[side + "SHO"] = (zero, lat * 180 + zero, sh_u)
+            cols[side + "ELB"] = (ef, lat * 200 + zero, eu)
+            cols[side + "WRA"] = (
+                ef + 260 * np.sin(arm + 0.3),
+                lat * 190 + zero,
+                eu - 260 * np.cos(arm + 0.3),
+            )
+            cols[side + "ASI"] = (100 + zero, lat * 120 + zero, pel_z)
+        cols["SACR"] = (-100 + zero, zero, pel_z + 10)
+        cols["C7"] = (-40 + zero, zero, pel_z + 520)
+        cols["HEAD"] = (60 + zero, zero, pel_z + 730)
+        f = np.stack([cols[k][0] for k in GAIT_LABELS], 1)
+        lft = np.stack([cols[k][1] for k in GAIT_LABELS], 1)
+        up = np.maximum(np.stack([cols[k][2] for k in GAIT_LABELS], 1), 5.0)
+        xy = base[:, None, :] + f[..., None] * fwd[:, None, :] + lft[..., None] * left[:, None, :]
+        return np.concatenate([xy, up[..., None]], axis=2)
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        t = np.asarray(times, dtype=np.float64)
+        return np.asarray(self._all(t)[np.arange(t.size), np.asarray(markers, dtype=np.int64)])
+
+
+class SampledMotion(Motion):
+    """Trajectories sampled at increasing times, linearly interpolated.
+
+    Parameters
+    ----------
+    times : array_like, shape (F,)
+        Sample times in seconds, increasing.
+    positions : array_like, shape (F, M, 3)
+        Positions in mm; NaN where the marker is missing.
+    loop : bool
+        Repeat the recording after its end (otherwise every marker is missing after it).
+    labels : sequence of str, optional
+        Marker labels.
+
+    Notes
+    -----
+    A position between two samples is NaN when either sample is missing, so a
+    gap in the recording becomes an occlusion.
+    """
+
+    def __init__(
+        self,
+        times: npt.ArrayLike,
+        positions: npt.ArrayLike,
+        loop: bool = True,
+        labels: Sequence[str] | None = None,
+    ) -> None:
+        self.times = np.asarray(times, dtype=np.float64)
+        self.data = np.asarray(positions, dtype=np.float64)
+        if self.data.ndim != 3 or self.data.shape[2] != 3 or self.data.shape[0] != self.times.size:
+            raise ValueError("positions must have shape (F, M, 3) with F = len(times)")
+        if self.times.size < 2 or np.any(np.diff(self.times) <= 0):
+            raise ValueError("a sampled motion needs at least 2 strictly increasing times")
+        self.loop = loop
+        self.n_markers = self.data.shape[1]
+        self.labels = tuple(labels) if labels else tuple(f"M{i}" for i in range(self.n_markers))
+        self._dt = float(self.times[-1] - self.times[-2])
+        self.duration = float(self.times[-1] - self.times[0]) + self._dt
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        rel = self.times - self.times[0]
+        n = rel.size
+        t = np.asarray(times, dtype=np.float64) - self.times[0]
+        m = np.asarray(markers, dtype=np.int64)
+        if self.loop:
+            t = np.mod(t, self.duration)
+        i = np.searchsorted(rel, t, side="right") - 1
+        inside = (i >= 0) & (t < self.duration)
+        i = np.clip(i, 0, n - 1)
+        j = (i + 1) % n if self.loop else np.minimum(i + 1, n - 1)
+        seg_end = np.where(i + 1 < n, rel[np.minimum(i + 1, n - 1)], self.duration)
+        frac = np.where(j == i, 0.0, (t - rel[i]) / (seg_end - rel[i]))
+        p0, p1 = self.data[i, m], self.data[j, m]
+        out = np.where(frac[:, None] > 0, p0 + frac[:, None] * (p1 - p0), p0)
+        out[~inside] = np.nan
+        return np.asarray(out)
+
+
+def from_c3d(path: str | Path, *, center: bool = True, loop: bool = True) -> SampledMotion:
+    """The 3-D markers of a C3D file as a motion (needs the ``c3d`` package).
+
+    Parameters
+    ----------
+    path : str or Path
+        The C3D file.
+    center : bool
+        Shift the recording horizontally so that its mean marker position is
+        above the origin (the simulated rig looks at the origin).
+    loop : bool
+        Repeat the recording after its end.
+
+    Returns
+    -------
+    SampledMotion
+        Positions in mm (``POINT:UNITS`` of m or cm are converted), missing
+        samples (negative residual) as NaN.
+
+    Raises
+    ------
+    ValueError
+        If the file holds no 3-D points.
+    """
+    import c3d  # optional dependency: spotlab[c3d]
+
+    with open(path, "rb") as fh:
+        reader = c3d.Reader(fh)
+        rate = float(reader.point_rate)
+        labels = [str(s).strip() for s in reader.point_labels]
+        units = reader.get("POINT:UNITS")
+        unit = units.string_value.strip().lower() if units is not None else "mm"
+        frames = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=True)]
+    if not frames or frames[0].shape[0] == 0:
+        raise ValueError(f"{path}: no 3-D points in this C3D file")
+    data = np.stack(frames).astype(np.float64)
+    xyz = data[..., :3] * {"m": 1000.0, "cm": 10.0}.get(unit, 1.0)
+    xyz[data[..., 3] < 0] = np.nan
+    if center and np.isfinite(xyz).any():
+        xyz[..., :2] -= np.nanmean(xyz[..., :2].reshape(-1, 2), axis=0)
+    times = np.arange(xyz.shape[0]) / rate
+    n = xyz.shape[1]
+    return SampledMotion(times, xyz, loop=loop, labels=(labels + [""] * n)[:n])
+
+
+def make_motion(name: str | Path, n_markers: int, seed: int = 0) -> Motion:
+    """The motion the command line names, with exactly ``n_markers`` markers.
+
+    ``wand``: the two wand LEDs, then reference markers (an L-frame first);
+    ``cluster``: rigid clusters of 4; ``gait``: the 19 walking-body markers;
+    anything else: a C3D file. Motions with too few markers are padded with
+    static reference markers, those with too many are cut.
+    """
+    if name == "wand":
+        base: Motion = WandDance(seed=seed)
+    elif name == "cluster":
+        base = RigidClusters(n_markers=n_markers, seed=seed)
+    elif name == "gait":
+        base = Gait()
+    else:
+        base = from_c3d(Path(name))
+    if base.n_markers >= n_markers:
+        return base if base.n_markers == n_markers else Subset(base, n_markers)
+    return Concat([base, reference_markers(n_markers - base.n_markers, seed)])

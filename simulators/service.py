@@ -1,0 +1,205 @@
+"""Simulated SPX systems as the command line and the tests start them.
+
+One options dataclass describes a simulated system; :func:`build_device`
+turns it into a :class:`SelspotDevice`, :func:`serve_pty` and :func:`serve_tcp`
+serve one on a pseudo-terminal or a local TCP port, and :func:`url_for` gives
+the equivalent in-process ``sim://`` URL (for ``serial.serial_for_url``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+from urllib.parse import parse_qsl, quote, urlsplit
+
+from spotlab.simulators.clock import DeviceClock
+from spotlab.simulators.faults import FaultInjector
+from spotlab.simulators.motions import MOTIONS, make_motion
+from spotlab.simulators.scene import Ambient, Mirror, Scene, ring_rig
+from spotlab.simulators.selspot import SelspotDevice
+
+if TYPE_CHECKING:
+    from spotlab.simulators.transports.pty import PtyServer
+    from spotlab.simulators.transports.tcp import TcpServer
+
+
+@dataclass
+class SelspotSimOptions:
+    """A simulated SPX system.
+
+    Parameters
+    ----------
+    cameras : int
+        Cameras in the rig (1-4); ``VER:0`` reports it as the maximum for ``CAMS:``.
+    leds : int
+        LEDs the motion carries (LED ids 0 .. leds-1).
+    rate_hz : float
+        Frame rate after reset or ``INIT:`` (the host may set another with ``RATE:``).
+    seed : int
+        Seed of noise, motion and random faults.
+    truth, fault_log : Path, optional
+        Ground-truth CSV and fault-log JSON to write.
+    faults : str
+        Fault schedule (see :mod:`spotlab.simulators.faults`).
+    fault_rate : float
+        Random frame faults per data frame.
+    clock_offset_s, clock_drift_ppm, clock_jitter_s : float
+        The device clock (see :class:`DeviceClock`).
+    motion : str
+        ``wand``, ``cluster``, ``gait`` or the path of a C3D file.
+    serial : str
+        Serial number in the ``VER:0`` reply.
+    ambient : float
+        Ambient infrared level on every detector (intensity units).
+    floor_reflectance : float
+        Reflectance of the floor (a mirror at z = 0); 0 for none.
+
+    Notes
+    -----
+    The baud rate is not an option: the device starts at 9600 and follows
+    ``COMM:`` as negotiated by the host.
+    """
+
+    cameras: int = 2
+    leds: int = 8
+    rate_hz: float = 100.0
+    seed: int = 0
+    truth: Path | None = None
+    fault_log: Path | None = None
+    faults: str = ""
+    fault_rate: float = 0.0
+    clock_offset_s: float = 0.0
+    clock_drift_ppm: float = 0.0
+    clock_jitter_s: float = 0.0
+    motion: str = "wand"
+    serial: str = "SIM00042"
+    ambient: float = 0.0
+    floor_reflectance: float = 0.05
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad option."""
+        if not 1 <= self.cameras <= 4:
+            raise ValueError(f"cameras must be 1 to 4, got {self.cameras}")
+        if not 1 <= self.leds <= 128:
+            raise ValueError(f"leds must be 1 to 128, got {self.leds}")
+        if not 1.0 <= self.rate_hz <= 10_000.0:
+            raise ValueError(f"rate must be 1 Hz to 10 kHz, got {self.rate_hz}")
+        if self.motion not in MOTIONS and not Path(self.motion).is_file():
+            raise ValueError(
+                f"motion {self.motion!r} is neither {', '.join(MOTIONS)} nor a C3D file"
+            )
+
+
+# URL query names of the options (short names first, the field names work too).
+_URL_NAMES = {
+    "rate": "rate_hz",
+    "clock_offset": "clock_offset_s",
+    "clock_drift": "clock_drift_ppm",
+    "clock_jitter": "clock_jitter_s",
+    "reflectance": "floor_reflectance",
+}
+_URL_SHORT = {v: k for k, v in _URL_NAMES.items()}
+
+
+def build_scene(options: SelspotSimOptions) -> Scene:
+    """The scene of a simulated system: ring rig, floor mirror, ambient light, motion."""
+    mirrors = (
+        [Mirror(reflectance=options.floor_reflectance)] if options.floor_reflectance > 0 else []
+    )
+    return Scene(
+        motion=make_motion(options.motion, options.leds, options.seed),
+        cameras=ring_rig(options.cameras),
+        mirrors=mirrors,
+        ambient=Ambient(level=options.ambient),
+    )
+
+
+def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> SelspotDevice:
+    """A powered-up simulated SPX device (banner queued at 9600 baud)."""
+    options.validate()
+    clock = DeviceClock(
+        offset_s=options.clock_offset_s,
+        drift_ppm=options.clock_drift_ppm,
+        jitter_s=options.clock_jitter_s,
+        seed=options.seed,
+        epoch_ns=now_ns,
+    )
+    faults = FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed)
+    return SelspotDevice(
+        build_scene(options),
+        clock,
+        faults,
+        serial=options.serial,
+        seed=options.seed,
+        truth=options.truth,
+        fault_log=options.fault_log,
+        default_rate_hz=options.rate_hz,
+        now_ns=clock.epoch_ns,
+    )
+
+
+def url_for(options: SelspotSimOptions) -> str:
+    """The ``sim://selspot?...`` URL of these options (defaults left out)."""
+    default = SelspotSimOptions()
+    parts = []
+    for f in fields(options):
+        value = getattr(options, f.name)
+        if value == getattr(default, f.name) or value is None:
+            continue
+        parts.append(f"{_URL_SHORT.get(f.name, f.name)}={quote(str(value), safe='/@:,.-')}")
+    return "sim://selspot" + ("?" + "&".join(parts) if parts else "")
+
+
+def options_from_url(url: str) -> SelspotSimOptions:
+    """Parse ``sim://selspot?cameras=4&leds=32&rate=200&faults=...``.
+
+    Raises
+    ------
+    ValueError
+        For another family, an unknown option or a value of the wrong type.
+    """
+    split = urlsplit(url)
+    if split.scheme != "sim" or split.netloc != "selspot":
+        raise ValueError(f"not a simulated selspot URL: {url!r} (expected sim://selspot?...)")
+    kinds = {f.name: f.type for f in fields(SelspotSimOptions)}
+    values: dict[str, Any] = {}
+    for key, text in parse_qsl(split.query, keep_blank_values=True):
+        name = _URL_NAMES.get(key, key)
+        if name not in kinds:
+            raise ValueError(
+                f"unknown option {key!r} in {url!r}; known: {', '.join(sorted(kinds))}"
+            )
+        kind = str(kinds[name])
+        try:
+            if kind == "int":
+                values[name] = int(text)
+            elif kind == "float":
+                values[name] = float(text)
+            elif "Path" in kind:
+                values[name] = Path(text) if text else None
+            else:
+                values[name] = text
+        except ValueError:
+            raise ValueError(f"option {key}={text!r} in {url!r} is not a valid {kind}") from None
+    options = SelspotSimOptions(**values)
+    options.validate()
+    return options
+
+
+def serve_pty(options: SelspotSimOptions) -> PtyServer:
+    """Start serving a simulated device on a pseudo-terminal; ``.path`` is the stable link."""
+    from spotlab.simulators.transports.pty import PtyServer
+
+    server = PtyServer(build_device(options))
+    server.start()
+    return server
+
+
+def serve_tcp(options: SelspotSimOptions, port: int = 0) -> TcpServer:
+    """Start serving a simulated device on 127.0.0.1:``port`` (0: any); ``.url`` is ``socket://``."""
+    from spotlab.simulators.transports.tcp import TcpServer
+
+    server = TcpServer(build_device(options), port=port)
+    server.start()
+    return server

@@ -1,0 +1,165 @@
+"""Serve a simulated device on a local TCP port, for pyserial's ``socket://`` URLs.
+
+One client at a time: a second connection is accepted and closed at once.
+A client that goes away leaves the device running; the next one picks it up
+where it is. TCP has no baud rate and no BREAK: the device's pacing still
+holds, ``COMM:`` needs no switch on the host side, and hosts reset with
+``RESET:``. On a disconnect fault the client's socket is closed and new
+connections are refused (accepted and closed) until the device returns.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import select
+import socket
+import threading
+import time
+from types import TracebackType
+
+from spotlab.simulators.selspot import SelspotDevice
+
+MIN_WAIT_S = 0.0005
+MAX_WAIT_S = 0.05
+MAX_PENDING = 1 << 20
+
+
+class TcpServer:
+    """A simulated device on ``127.0.0.1:port``, served by one thread.
+
+    Parameters
+    ----------
+    device : SelspotDevice
+        The device to serve (closed by :meth:`stop`).
+    port : int
+        TCP port; 0 picks a free one.
+
+    Attributes
+    ----------
+    url : str
+        ``socket://127.0.0.1:PORT``, for ``serial.serial_for_url``.
+    """
+
+    def __init__(self, device: SelspotDevice, port: int = 0) -> None:
+        self.device = device
+        self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self._listener.bind(("127.0.0.1", port))
+            self._listener.listen(4)
+        except OSError:
+            self._listener.close()
+            raise
+        self.port = int(self._listener.getsockname()[1])
+        self.url = f"socket://127.0.0.1:{self.port}"
+        self.stats = {"bytes_out": 0, "bytes_in": 0, "clients": 0, "refused": 0}
+        self._client: socket.socket | None = None
+        self._pending = bytearray()
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> TcpServer:
+        """Start serving."""
+        if self._thread is not None:
+            raise RuntimeError("TcpServer already started")
+        self._thread = threading.Thread(target=self._run, name="spotlab-sim-tcp", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving, close every socket, close the device."""
+        self._stop.set()
+        with contextlib.suppress(OSError):
+            self._wake_w.send(b"x")
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+        self._drop_client()
+        for s in (self._listener, self._wake_r, self._wake_w):
+            s.close()
+        self.device.close()
+
+    def __enter__(self) -> TcpServer:
+        return self if self._thread is not None else self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+    def _drop_client(self) -> None:
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        self._pending.clear()
+
+    def _accept(self, down: bool) -> None:
+        conn, _ = self._listener.accept()
+        if down or self._client is not None:
+            self.stats["refused"] += 1
+            conn.close()
+            return
+        conn.setblocking(False)
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._client = conn
+        self.stats["clients"] += 1
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            now = time.monotonic_ns()
+            down = self.device.link_down(now)
+            if down:
+                self._drop_client()
+            segments = self.device.output_segments(now)
+            if self._client is not None:
+                for seg in segments:
+                    self._pending += seg.data
+                self._send_pending()
+            nxt = self.device.next_event_ns()
+            wait = (
+                MAX_WAIT_S if nxt is None else min(max((nxt - now) / 1e9, MIN_WAIT_S), MAX_WAIT_S)
+            )
+            readers: list[socket.socket] = [self._listener, self._wake_r]
+            if self._client is not None:
+                readers.append(self._client)
+            writers = [self._client] if self._client is not None and self._pending else []
+            readable, _, _ = select.select(readers, writers, [], wait)
+            if self._listener in readable:
+                self._accept(down)
+            if self._client is not None and self._client in readable:
+                self._receive()
+            if self._wake_r in readable:
+                with contextlib.suppress(OSError):
+                    self._wake_r.recv(64)
+
+    def _receive(self) -> None:
+        assert self._client is not None
+        try:
+            data = self._client.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._drop_client()
+            return
+        self.stats["bytes_in"] += len(data)
+        self.device.receive(data, time.monotonic_ns(), line_baud=None)
+
+    def _send_pending(self) -> None:
+        assert self._client is not None
+        while self._pending:
+            try:
+                n = self._client.send(self._pending)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:
+                self._drop_client()
+                return
+            self.stats["bytes_out"] += n
+            del self._pending[:n]
+        del self._pending[MAX_PENDING:]
