@@ -11,8 +11,9 @@ from __future__ import annotations
 import importlib
 from importlib.metadata import entry_points
 
-from spotlab.core.errors import ConfigurationError
 from spotlab.drivers.base import DeviceInfo, Driver
+
+from spotlab.core.errors import ConfigurationError
 
 DRIVERS: dict[str, tuple[str, str]] = {
     "selspot": ("spotlab.drivers.selspot", "SelspotDriver"),

@@ -1,0 +1,452 @@
+"""The SPX device state machine: bring-up, streaming, recovery, stop (selspot.md §6-7).
+
+:class:`SelspotDriver` opens the port at 9600 baud, resets the device (BREAK,
+else ``RESET:``) and waits for its banner, moves to the streaming baud rate
+(``COMM``, then ``VER:0`` within 1 s, else reset and try once more), configures
+it (``CAMS``, ``LEDT``, ``SLOT``, ``RATE``, ``BGND``, ``AGC``: every reply
+checked) and starts the stream. :meth:`recv` decodes what the port holds.
+
+While streaming the driver watches for the faults of selspot.md §7 and recovers
+by itself: a port that went away, the device's reset banner, or no valid frame
+for ``max(0.5 s, 20 frame periods)``. It then reopens the port as often as
+needed, resets, renegotiates, reconfigures and restarts, marks the discontinuity
+in the decoder, counts a reconnect and a gap, and tells the taps
+(``disconnected`` / ``device_reset``, then ``reconnected``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterable
+from typing import Any
+
+from serial.tools import list_ports
+from spotlab.drivers.base import DeviceInfo, Driver
+from spotlab.drivers.mcs1.commands import (
+    DeviceConfigurationError,
+    encode_command,
+    parse_reply,
+)
+from spotlab.drivers.mcs1.link import SerialLink
+from spotlab.drivers.mcs1.session import CommandChannel
+from spotlab.drivers.selspot.config import SelspotConfig
+from spotlab.drivers.selspot.protocol import (
+    FAMILY_CODE,
+    UNITS,
+    VALUES,
+    DeviceVersion,
+    SelspotDecoder,
+    parse_version,
+)
+
+from spotlab.core.errors import (
+    ConfigurationError,
+    DeviceDisconnected,
+    DeviceError,
+    DeviceTimeout,
+    ProtocolError,
+)
+from spotlab.core.frames import FrameBlock
+from spotlab.core.streams import StreamSpec
+from spotlab.core.wire import LinkEventKind
+
+log = logging.getLogger(__name__)
+
+#: Pause between two reconnection attempts (s).
+RETRY_INTERVAL = 0.05
+#: Longest wait for the banner while recovering (s): a returning device answers in ms.
+RECOVERY_RESET_WAIT = 0.5
+#: Faults after which the driver tries to recover instead of raising.
+_TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
+
+
+class SelspotDriver(Driver):
+    """Driver of an SPX lateral-photodiode camera system.
+
+    Parameters
+    ----------
+    port : str
+        Device path (``/dev/ttyUSB0``) or pyserial URL (``socket://``, ``sim://``).
+    name : str, optional
+        Stream name; ``"selspot"`` by default.
+    cameras : int
+        Number of cameras, 1-4.
+    leds : int or sequence
+        LED count (ids 0..N-1 at 32 mA), list of ids, or list of
+        ``(id, drive current in 1/4 mA)`` in firing order.
+    rate_hz : float
+        Frame rate in Hz.
+    slot_us : int
+        Slot period in µs, 50-1000.
+    bgnd : int
+        Background differencing: 0 none, 1 dark sample per slot, 2 dark slot per frame.
+    agc : int or None
+        AGC target intensity (AGC on), or ``None`` (AGC off).
+    baud : int or "auto"
+        Line rate while streaming; ``"auto"`` picks the slowest that carries the stream.
+    reply_timeout : float
+        Seconds to wait for each reply and for the reset banner.
+    reconnect_timeout : float or None
+        Give up recovering after this many seconds (``DeviceDisconnected``);
+        ``None`` keeps trying for as long as ``recv`` is called.
+
+    Raises
+    ------
+    ConfigurationError
+        If the configuration is out of range or its slots do not fit the frame period.
+    BandwidthError
+        If the stream does not fit ``baud``.
+    """
+
+    family = "selspot"
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        name: str | None = None,
+        cameras: int = 1,
+        leds: int | Iterable[int | tuple[int, int]] = 8,
+        rate_hz: float = 100.0,
+        slot_us: int = 100,
+        bgnd: int = 1,
+        agc: int | None = None,
+        baud: int | str = 2_000_000,
+        reply_timeout: float = 1.0,
+        reconnect_timeout: float | None = None,
+    ) -> None:
+        super().__init__(port, name=name)
+        self.config = SelspotConfig.create(
+            cameras=cameras,
+            leds=leds,
+            rate_hz=rate_hz,
+            slot_us=slot_us,
+            bgnd=bgnd,
+            agc=agc,
+            baud=baud,
+        )
+        if not reply_timeout > 0:
+            raise ConfigurationError(f"reply_timeout must be positive, got {reply_timeout}")
+        self.reply_timeout = reply_timeout
+        self.reconnect_timeout = reconnect_timeout
+        #: What the device said of itself (``VER:0``), once started.
+        self.device: DeviceVersion | None = None
+        self._decoder = SelspotDecoder.from_config(self.config, stats=self.stats)
+        self._link = SerialLink(port, on_rx=self._tap_rx, on_tx=self._tap_tx)
+        self._channel = CommandChannel(self._link, reply_timeout, self.stats)
+        self._streaming = False
+        self._stash: list[FrameBlock] = []
+        self._recovering: str | None = None
+        self._outage_start = 0.0
+        period_s = 1.0 / self.config.rate_hz
+        self._silence_ns = int(max(0.5, 20 * period_s) * 1e9)
+        send_s = self.config.frame_bytes * 10 / self.config.baud
+        self._idle_flush_ns = int(max(0.05, 3 * send_s) * 1e9)
+        self._last_frame_ns = 0
+        self._last_rx_ns = 0
+
+    # -- description ---------------------------------------------------------------
+    @property
+    def spec(self) -> StreamSpec:
+        """The stream: ``image2d``, cameras x LEDs, x/y/intensity in detector counts."""
+        c = self.config
+        return StreamSpec(
+            name=self.name,
+            kind="image2d",
+            n_sensors=c.cameras,
+            n_markers=c.n_leds,
+            rate_hz=c.rate_hz,
+            tick_hz=1e6,
+            slot_period_s=c.slot_us * 1e-6,
+            values=VALUES,
+            units=UNITS,
+            metadata={"config": c.to_dict(), "led_ids": [led for led, _ in c.leds]},
+        )
+
+    def metadata(self) -> dict[str, Any]:
+        """Everything a recording needs to decode this stream again.
+
+        ``decoder_from_metadata(driver.metadata())`` rebuilds the decoder.
+        """
+        return {
+            **super().metadata(),
+            "config": self.config.to_dict(),
+            "device": None if self.device is None else self.device.to_dict(),
+            "protocol": {"transport": "MCS-1", "family_code": FAMILY_CODE, "version": 1},
+            "decoder": "spotlab.drivers.selspot:decoder_from_metadata",
+        }
+
+    @property
+    def decoder(self) -> SelspotDecoder:
+        """The decoder fed by this driver (its ``stats`` are the driver's)."""
+        return self._decoder
+
+    @property
+    def recovering(self) -> bool:
+        """Whether the driver is reconnecting after a fault."""
+        return self._recovering is not None
+
+    # -- life cycle ----------------------------------------------------------------
+    def _start(self) -> None:
+        try:
+            if not self._link.is_open:
+                self._link.open()
+                self._tap_event("open", port=self.port)
+            self._bring_up(self.reply_timeout)
+        except BaseException:
+            self._link.close()
+            raise
+
+    def _bring_up(self, reset_wait: float) -> None:
+        """Reset, negotiate, configure and start; one more try if it fails after the reset."""
+        for attempt in (1, 2):
+            self._channel.reset(reset_wait)
+            try:
+                self._configure_and_start()
+                return
+            except (DeviceTimeout, ProtocolError) as exc:
+                if attempt == 2:
+                    raise
+                log.info("%s: %s; resetting and trying once more", self.port, exc)
+
+    def _configure_and_start(self) -> None:
+        c = self.config
+        reply = self._channel.negotiate(c.baud, FAMILY_CODE)
+        self._tap_event("baud_change", baud=c.baud)
+        self.device = parse_version(reply.text)
+        if self.device.max_cameras < c.cameras or self.device.max_leds < c.n_leds:
+            raise ConfigurationError(
+                f"the device on {self.port} ({reply.text}) supports at most "
+                f"{self.device.max_cameras} cameras and {self.device.max_leds} LEDs; "
+                f"configured {c.cameras} cameras and {c.n_leds} LEDs"
+            )
+        for verb, args in c.commands():
+            try:
+                self._channel.transact(verb, args)
+            except DeviceError as exc:
+                if verb == "LEDT" and exc.code == 0x02:
+                    raise DeviceConfigurationError(
+                        f"{exc}: an LED table of {c.n_leds} entries makes a "
+                        f"{len(encode_command(verb, args)) - 1}-byte command and MCS-1 "
+                        "accepts 255 (61 entries); see docs/drivers.md",
+                        code=exc.code,
+                    ) from exc
+                raise
+        self._tap_event("configured", config=c.to_dict())
+        try:
+            self._channel.transact("START")
+        except DeviceError as exc:
+            if exc.code == 0x80:
+                raise type(exc)(
+                    f"{exc}; the host computes {c.line_bits_per_s / 1e6:.4g} Mbit/s for "
+                    f"{c.cameras} camera(s) x {c.n_leds} LEDs at {c.rate_hz:g} Hz, "
+                    f"{c.baud} baud with 20 % reserve carries "
+                    f"{0.8 * c.baud / 1e6:.4g}: lower the rate or use a faster baud",
+                    code=exc.code,
+                ) from exc
+            raise
+        # The stream restarts: seq and frame_no count from 0 again.
+        self._decoder.mark_discontinuity()
+        self._streaming = True
+        now = time.monotonic_ns()
+        self._last_frame_ns = self._last_rx_ns = now
+        self._tap_event("started")
+
+    def _stop(self) -> None:
+        if self._recovering is not None:
+            self._recovering = None
+            return
+        if not self._streaming:
+            return
+        self._streaming = False
+        try:
+            self._link.write(encode_command("STOP"))
+            self._await_stop_reply()
+        except DeviceDisconnected as exc:
+            log.warning("%s: port lost while stopping: %s", self.port, exc)
+        self._tap_event("stopped")
+
+    def _await_stop_reply(self) -> None:
+        """Decode frames until the ``OKAY`` event frame; keep the frames for ``recv``."""
+        deadline = time.monotonic() + self.reply_timeout
+        while True:
+            self._read_and_decode(deadline - time.monotonic())
+            for event in self._decoder.take_events():
+                try:
+                    reply = parse_reply(event.payload)
+                except ProtocolError as exc:
+                    log.warning("%s: while stopping: %s", self.port, exc)
+                    continue
+                reply.raise_for_error("STOP:")
+                if reply.kind == "okay":
+                    return
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(
+                    f"no OKAY to STOP: from {self.port} within {self.reply_timeout:g} s"
+                )
+
+    def _close(self) -> None:
+        self._streaming = False
+        self._recovering = None
+        if self._link.is_open:
+            self._link.close()
+            self._tap_event("close", port=self.port)
+
+    # -- streaming -----------------------------------------------------------------
+    def _read_and_decode(self, timeout: float | None) -> FrameBlock | None:
+        """One read, decoded; flush a frame that stopped arriving. Frames go to the stash."""
+        data, t_ns = self._link.read(None if timeout is None else max(0.0, timeout))
+        block = self._decoder.feed(data, t_ns) if data else None
+        if data:
+            self._last_rx_ns = t_ns
+        elif self._decoder.buffered and t_ns - self._last_rx_ns > self._idle_flush_ns:
+            block = self._decoder.flush()
+        if block is not None and len(block):
+            self._last_frame_ns = t_ns
+            self._stash.append(block)
+        return block
+
+    def _recv_internal(self, timeout: float | None) -> FrameBlock | None:
+        if self._stash:
+            return self._stash.pop(0)
+        if self._recovering is not None:
+            self._recover(timeout)
+            return None
+        if not self._streaming:
+            raise DeviceError(f"{self.name} on {self.port} is not streaming: call start() first")
+        try:
+            self._read_and_decode(timeout)
+        except DeviceDisconnected as exc:
+            self._begin_recovery("disconnected", str(exc))
+            return None
+        self._watch_events()
+        now = time.monotonic_ns()
+        if self._decoder.banner_seen:
+            self._decoder.banner_seen = False
+            self._begin_recovery("device_reset", "the device sent its reset banner")
+        elif now - self._last_frame_ns > self._silence_ns:
+            self._begin_recovery(
+                "device_reset", f"no valid frame for {(now - self._last_frame_ns) / 1e9:.2f} s"
+            )
+        return self._stash.pop(0) if self._stash else None
+
+    def _watch_events(self) -> None:
+        """Replies that arrive while streaming (none are expected): log them."""
+        for event in self._decoder.take_events():
+            try:
+                reply = parse_reply(event.payload)
+            except ProtocolError as exc:
+                log.warning("%s: unexpected event frame: %s", self.port, exc)
+                continue
+            level = logging.WARNING if reply.kind in ("error", "warn") else logging.INFO
+            log.log(level, "%s: device sent %r while streaming", self.port, reply.text)
+
+    # -- recovery ------------------------------------------------------------------
+    def _begin_recovery(self, kind: LinkEventKind, reason: str) -> None:
+        log.warning("%s: %s; reconnecting", self.port, reason)
+        self._streaming = False
+        self._recovering = reason
+        self._outage_start = time.monotonic()
+        self._tap_event(kind, reason=reason)
+
+    def _recover(self, timeout: float | None) -> None:
+        """Try to reconnect until it works or ``timeout`` passes (at least one try)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self._try_reconnect():
+            now = time.monotonic()
+            if (
+                self.reconnect_timeout is not None
+                and now - self._outage_start > self.reconnect_timeout
+            ):
+                reason, self._recovering = self._recovering, None
+                self._link.close()
+                raise DeviceDisconnected(
+                    f"{self.port}: could not reconnect within {self.reconnect_timeout:g} s "
+                    f"after: {reason}"
+                )
+            wait = RETRY_INTERVAL if deadline is None else min(RETRY_INTERVAL, deadline - now)
+            if wait <= 0:
+                return
+            time.sleep(wait)
+
+    def _try_reconnect(self) -> bool:
+        try:
+            if not self._link.is_open:
+                self._link.open()
+                self._tap_event("open", port=self.port)
+            self._bring_up(min(self.reply_timeout, RECOVERY_RESET_WAIT))
+        except DeviceConfigurationError:
+            raise
+        except DeviceDisconnected:
+            self._link.close()
+            return False
+        except (*_TRANSIENT, DeviceError):
+            return False
+        outage = time.monotonic() - self._outage_start
+        self.stats.reconnects += 1
+        self.stats.gaps += 1
+        self._tap_event("reconnected", reason=self._recovering, outage_s=round(outage, 3))
+        log.warning("%s: streaming again after %.2f s", self.port, outage)
+        self._recovering = None
+        return True
+
+    # -- discovery -----------------------------------------------------------------
+    @classmethod
+    def detect(cls, ports: Iterable[str] | None = None, timeout: float = 0.3) -> list[DeviceInfo]:
+        """SPX devices answering on this machine's serial ports.
+
+        Parameters
+        ----------
+        ports : iterable of str, optional
+            Ports or URLs to probe; by default every serial port the OS lists
+            with hardware behind it (ports whose hardware id is ``n/a``, such
+            as unused built-in ``ttyS`` ports, are skipped).
+        timeout : float
+            Seconds to wait for each port's reset banner and reply.
+
+        Returns
+        -------
+        list of DeviceInfo
+            One per device that answered ``VER:0`` as SPX. Each probed device
+            is left reset (9600 baud, not streaming). Ports that cannot be
+            opened (busy, no permission) are skipped.
+        """
+        if ports is None:
+            ports = [p.device for p in list_ports.comports() if p.hwid and p.hwid != "n/a"]
+        found = []
+        for port in ports:
+            info = cls._probe(port, timeout)
+            if info is not None:
+                found.append(info)
+        return found
+
+    @classmethod
+    def _probe(cls, port: str, timeout: float) -> DeviceInfo | None:
+        link = SerialLink(port)
+        try:
+            link.open()
+        except (DeviceError, ConfigurationError) as exc:
+            log.debug("detect: skipping %s: %s", port, exc)
+            return None
+        try:
+            channel = CommandChannel(link, timeout)
+            channel.reset(timeout)
+            reply = channel.transact("VER", "0", data_prefix=FAMILY_CODE)
+            version = parse_version(reply.text)
+        except (DeviceError, ProtocolError, ConfigurationError) as exc:
+            log.debug("detect: no SPX device on %s: %s", port, exc)
+            return None
+        finally:
+            link.close()
+        return DeviceInfo(
+            family=cls.family,
+            port=port,
+            description=version.text,
+            serial_number=version.serial_number,
+            extra={
+                "firmware": version.firmware,
+                "max_cameras": version.max_cameras,
+                "max_leds": version.max_leds,
+            },
+        )
