@@ -7,6 +7,7 @@ calls once for all families.
 
 from __future__ import annotations
 
+import os
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -52,7 +53,7 @@ class Driver(ABC):
 
     Parameters
     ----------
-    port : str
+    port : str or path-like
         Device path (``/dev/ttyUSB0``) or pyserial URL (``socket://``, ``sim://``...).
     name : str, optional
         Stream name; defaults to the family name.
@@ -60,8 +61,8 @@ class Driver(ABC):
 
     family: ClassVar[str] = ""
 
-    def __init__(self, port: str, *, name: str | None = None) -> None:
-        self.port = port
+    def __init__(self, port: str | os.PathLike[str], *, name: str | None = None) -> None:
+        self.port: str = os.fspath(port)
         self.name = name or self.family
         self.stats = LinkStats()
         self._taps: list[WireTap] = []

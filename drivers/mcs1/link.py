@@ -14,6 +14,7 @@ away while in use is :class:`DeviceDisconnected`.
 from __future__ import annotations
 
 import errno
+import os
 import time
 from collections.abc import Callable
 
@@ -85,18 +86,27 @@ class SerialLink:
 
     Parameters
     ----------
-    url : str
+    url : str or path-like
         Device path or pyserial URL.
     on_rx, on_tx : callable, optional
         ``f(data, t_ns)`` called for every chunk read (with its arrival stamp)
         and every chunk written (stamped just before the write).
     """
 
-    def __init__(self, url: str, *, on_rx: ByteTap | None = None, on_tx: ByteTap | None = None):
-        self.url = url
+    def __init__(
+        self,
+        url: str | os.PathLike[str],
+        *,
+        on_rx: ByteTap | None = None,
+        on_tx: ByteTap | None = None,
+    ) -> None:
+        self.url = os.fspath(url)
         self.on_rx = on_rx
         self.on_tx = on_tx
-        self._ser: serial.SerialBase | None = None
+        # One pyserial object for the link's life, opened and closed as needed: some
+        # handlers keep state in it (a sim:// port keeps its simulated device).
+        self._port_obj: serial.SerialBase | None = None
+        self._ser: serial.SerialBase | None = None  # the port object while open
         self._timeout: float | None = -1.0
 
     @property
@@ -124,12 +134,15 @@ class SerialLink:
         if self._ser is not None:
             return
         try:
-            ser = serial.serial_for_url(self.url, do_not_open=True)
+            if self._port_obj is None:
+                ser = serial.serial_for_url(self.url, do_not_open=True)
+                ser.write_timeout = 2.0
+                if "://" not in self.url:
+                    ser.exclusive = True  # two programs on one port garble both sessions
+                self._port_obj = ser
+            ser = self._port_obj
             ser.baudrate = baud
             ser.timeout = 0
-            ser.write_timeout = 2.0
-            if "://" not in self.url:
-                ser.exclusive = True  # two programs on one port garble both sessions
             ser.open()
         except (serial.SerialException, OSError, ValueError) as exc:
             raise open_error(self.url, exc) from exc

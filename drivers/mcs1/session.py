@@ -40,6 +40,8 @@ log = logging.getLogger(__name__)
 
 #: Time the device has to answer ``VER:0`` at a new baud rate (mcs1.md §1).
 VER_WINDOW = 1.0
+#: Longest wait for the banner after a BREAK (s): a device answers within ~15 ms at 9600 baud.
+BREAK_WAIT = 0.15
 #: Quiet time after the banner before the first command (a second banner may follow).
 _SETTLE = 0.02
 
@@ -84,7 +86,7 @@ class CommandChannel:
         """Bring the device to its reset state at 9600 baud and wait for the banner.
 
         Sends a BREAK (unless BREAK is known not to reach the device on this
-        link) and waits up to a quarter of ``timeout``; then, without a banner,
+        link) and waits up to a quarter of ``timeout`` (at most 0.15 s); then, without a banner,
         sends ``\\r`` + ``RESET:`` at 9600 baud and waits for the rest.
 
         Parameters
@@ -105,7 +107,7 @@ class CommandChannel:
         sent = []
         if self.break_works is not False and self.link.send_break():
             sent.append("a BREAK")
-            if self._await_banner(time.monotonic() + total / 4):
+            if self._await_banner(time.monotonic() + min(total / 4, BREAK_WAIT)):
                 self.break_works = True
                 return
         # An empty line ends any half-received command; the device ignores it.

@@ -17,6 +17,7 @@ in the decoder, counts a reconnect and a gap, and tells the taps
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Iterable
 from typing import Any
@@ -66,7 +67,7 @@ class SelspotDriver(Driver):
 
     Parameters
     ----------
-    port : str
+    port : str or path-like
         Device path (``/dev/ttyUSB0``) or pyserial URL (``socket://``, ``sim://``).
     name : str, optional
         Stream name; ``"selspot"`` by default.
@@ -103,7 +104,7 @@ class SelspotDriver(Driver):
 
     def __init__(
         self,
-        port: str,
+        port: str | os.PathLike[str],
         *,
         name: str | None = None,
         cameras: int = 1,
@@ -133,7 +134,7 @@ class SelspotDriver(Driver):
         #: What the device said of itself (``VER:0``), once started.
         self.device: DeviceVersion | None = None
         self._decoder = SelspotDecoder.from_config(self.config, stats=self.stats)
-        self._link = SerialLink(port, on_rx=self._tap_rx, on_tx=self._tap_tx)
+        self._link = SerialLink(self.port, on_rx=self._tap_rx, on_tx=self._tap_tx)
         self._channel = CommandChannel(self._link, reply_timeout, self.stats)
         self._streaming = False
         self._stash: list[FrameBlock] = []
@@ -393,7 +394,9 @@ class SelspotDriver(Driver):
 
     # -- discovery -----------------------------------------------------------------
     @classmethod
-    def detect(cls, ports: Iterable[str] | None = None, timeout: float = 0.3) -> list[DeviceInfo]:
+    def detect(
+        cls, ports: Iterable[str | os.PathLike[str]] | None = None, timeout: float = 0.3
+    ) -> list[DeviceInfo]:
         """SPX devices answering on this machine's serial ports.
 
         Parameters
@@ -416,7 +419,7 @@ class SelspotDriver(Driver):
             ports = [p.device for p in list_ports.comports() if p.hwid and p.hwid != "n/a"]
         found = []
         for port in ports:
-            info = cls._probe(port, timeout)
+            info = cls._probe(os.fspath(port), timeout)
             if info is not None:
                 found.append(info)
         return found

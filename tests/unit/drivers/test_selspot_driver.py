@@ -105,7 +105,7 @@ def test_session_streams_and_stops(peer: SpxPeer) -> None:
 
 
 def test_spec_and_metadata_rebuild_the_decoder(peer: SpxPeer) -> None:
-    driver = make_driver(peer.path, slot_us=150)
+    driver = make_driver(Path(peer.path), slot_us=150)  # path-like ports work too
     spec = driver.spec
     assert (spec.kind, spec.n_sensors, spec.n_markers, spec.rate_hz) == ("image2d", 2, 3, 200.0)
     assert spec.tick_hz == 1e6 and spec.slot_period_s == pytest.approx(150e-6)
