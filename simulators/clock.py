@@ -23,6 +23,8 @@ import numpy as np
 import numpy.typing as npt
 
 F64 = npt.NDArray[np.float64]
+# Rounding guard: (offset + osc) * 1e6 can land a hair below a whole tick.
+_EPS_US = 1e-4
 
 
 class DeviceClock:
@@ -108,7 +110,7 @@ class DeviceClock:
 
     def ticks(self, world_ns: int) -> int:
         """Whole device µs ticks (unwrapped; the wire takes them modulo 2**32)."""
-        return int(np.floor(self.device_us(world_ns)))
+        return int(np.floor(self.device_us(world_ns) + _EPS_US))
 
     def world_to_ticks(self, world_ns: npt.ArrayLike) -> npt.NDArray[np.int64]:
         """Vectorised :meth:`ticks`, shape preserved."""
@@ -116,7 +118,7 @@ class DeviceClock:
         osc = (w - self.epoch_ns) * 1e-9 * self._rate
         idx = np.searchsorted(self._step_osc, osc, side="right")
         steps = np.concatenate([[0.0], self._step_sum])[idx]
-        return np.floor((self.offset_s + osc + steps) * 1e6).astype(np.int64)
+        return np.floor((self.offset_s + osc + steps) * 1e6 + _EPS_US).astype(np.int64)
 
     def ticks_to_world_ns(self, ticks: npt.ArrayLike) -> F64:
         """World ns at which the counter reads ``ticks`` (unwrapped µs), assuming no steps.

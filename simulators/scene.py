@@ -170,6 +170,17 @@ class Spots:
     attenuation: F64
     visible: B
 
+    def cameras(self, n: int) -> Spots:
+        """The same spots for the first ``n`` cameras only (those a ``CAMS:`` setting uses)."""
+        return Spots(
+            self.u[:, :n],
+            self.v[:, :n],
+            self.distance[:, :n],
+            self.cos_axis[:, :n],
+            self.attenuation[:, :n],
+            self.visible[:, :n],
+        )
+
 
 @dataclass
 class Scene:

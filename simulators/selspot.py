@@ -393,6 +393,7 @@ class SelspotDevice(SpxCommands):
             entry.detail = {"before_seq": seq}
             self.line.enqueue(data, t, self._baud, "data", **meta)
         elif entry.kind == "duplicate":
+            entry.detail = {"copied_seq": seq}
             self.line.enqueue(data, t, self._baud, "data", **meta)
             self.line.enqueue(
                 data, t, self._baud, "data", seq=seq, frame_no=taken.frame_no, duplicate_of=entry.id

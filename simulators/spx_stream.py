@@ -128,15 +128,18 @@ class SpxStream:
         epoch = self.clock.epoch_ns
         t_on = (self.clock.world_ns(slot_osc) + jitter_ns - epoch) * 1e-9
         positions = self.scene.positions(t_on, self.ids)
-        spots = self.scene.spots(positions, t_on, self.ids)
-        amb_on = self.scene.ambient_level(t_on)
+        c = self.cams
+        spots = self.scene.spots(positions, t_on, self.ids).cameras(c)
+        amb_on = self.scene.ambient_level(t_on)[:, :c]
         amb_dark = None
-        if cfg.bgnd == 1:
-            dark_osc = self._osc0 + (k + 0.2) * self.slot_s
-            amb_dark = self.scene.ambient_level((self.clock.world_ns(dark_osc) - epoch) * 1e-9)
-        elif cfg.bgnd == 2:
-            dark_osc = np.full(n, self._osc0 + (n + 0.5) * self.slot_s)
-            amb_dark = self.scene.ambient_level((self.clock.world_ns(dark_osc) - epoch) * 1e-9)
+        if cfg.bgnd:
+            dark_osc = (
+                self._osc0 + (k + 0.2) * self.slot_s
+                if cfg.bgnd == 1
+                else np.full(n, self._osc0 + (n + 0.5) * self.slot_s)
+            )
+            t_dark = (self.clock.world_ns(dark_osc) - epoch) * 1e-9
+            amb_dark = self.scene.ambient_level(t_dark)[:, :c]
         reading = self.psd.measure(
             spots,
             self.current * MA_PER_STEP,
@@ -173,7 +176,7 @@ class SpxStream:
     def _agc(self, reading: PsdReading) -> None:
         """Per LED, steer the drive current so that the brightest valid camera nears the target."""
         valid = (reading.flags & wire.FLAG_VALID) != 0
-        level = np.where(valid, reading.intensity, -1).max(axis=1)
+        level = np.where(valid, reading.intensity.astype(np.int64), -1).max(axis=1)
         seen = level >= 0
         target = self.config.agc_target
         step = np.maximum(1, self.current // 8)

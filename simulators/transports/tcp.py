@@ -128,10 +128,10 @@ class TcpServer:
                 readers.append(self._client)
             writers = [self._client] if self._client is not None and self._pending else []
             readable, _, _ = select.select(readers, writers, [], wait)
+            if self._client is not None and self._client in readable:
+                self._receive()  # first: a client that left frees the place for the next
             if self._listener in readable:
                 self._accept(down)
-            if self._client is not None and self._client in readable:
-                self._receive()
             if self._wake_r in readable:
                 with contextlib.suppress(OSError):
                     self._wake_r.recv(64)
