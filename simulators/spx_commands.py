@@ -24,6 +24,7 @@ from spotlab.simulators.scene import Scene
 from spotlab.simulators.spx_stream import SpxConfig, SpxStream
 
 FIRMWARE = "1.0"
+MAX_CAMERAS = 4
 MAX_LEDS = 128
 _HEX = frozenset("0123456789ABCDEFabcdef")
 
@@ -98,7 +99,7 @@ class SpxCommands:
 
     def _cmd_ver(self, cmd: Command, t: int) -> str:
         self._int_param(cmd, 0, 0)
-        return f"SPX {FIRMWARE} {self.serial} {self.scene.n_cameras} {MAX_LEDS}"
+        return f"SPX {FIRMWARE} {self.serial} {MAX_CAMERAS} {MAX_LEDS}"
 
     def _cmd_comm(self, cmd: Command, t: int) -> None:
         self._not_streaming()
@@ -113,7 +114,8 @@ class SpxCommands:
 
     def _cmd_cams(self, cmd: Command, t: int) -> str:
         self._not_streaming()
-        self._config.cameras = self._int_param(cmd, 1, self.scene.n_cameras)
+        # 1-4 whatever the rig: cameras that are not connected read nothing.
+        self._config.cameras = self._int_param(cmd, 1, MAX_CAMERAS)
         return self._configured()
 
     def _cmd_slot(self, cmd: Command, t: int) -> str:

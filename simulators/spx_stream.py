@@ -128,7 +128,7 @@ class SpxStream:
         epoch = self.clock.epoch_ns
         t_on = (self.clock.world_ns(slot_osc) + jitter_ns - epoch) * 1e-9
         positions = self.scene.positions(t_on, self.ids)
-        c = self.cams
+        c = min(self.cams, self.scene.n_cameras)
         spots = self.scene.spots(positions, t_on, self.ids).cameras(c)
         amb_on = self.scene.ambient_level(t_on)[:, :c]
         amb_dark = None
@@ -148,6 +148,8 @@ class SpxStream:
             self.rng,
             self.scene.ambient.centroid,
         )
+        if c < self.cams:
+            reading = _with_absent_cameras(reading, self.cams - c)
         reading.flags |= np.where(self.agc_limit[:, None], wire.FLAG_AGC_LIMIT, 0).astype(np.uint8)
         steps = self.clock.step_count(self._osc0)
         truth = TruthRow(
@@ -210,3 +212,19 @@ class SpxStream:
         return "".join(
             f"{i:02X}{c:02X}" for i, c in zip(self.ids.tolist(), self.current.tolist(), strict=True)
         )
+
+
+def _with_absent_cameras(reading: PsdReading, n: int) -> PsdReading:
+    """Append ``n`` cameras that are not connected: no light, so invalid and low signal."""
+    rows = reading.x.shape[0]
+
+    def pad(a: npt.NDArray[np.generic], value: float) -> npt.NDArray[np.generic]:
+        return np.concatenate([a, np.full((rows, n), value, dtype=a.dtype)], axis=1)
+
+    return PsdReading(
+        x=pad(reading.x, wire.INVALID),
+        y=pad(reading.y, wire.INVALID),
+        intensity=pad(reading.intensity, 0),
+        flags=pad(reading.flags, wire.FLAG_LOW_SIGNAL),
+        power=pad(reading.power, 0.0),
+    )

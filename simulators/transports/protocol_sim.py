@@ -15,6 +15,9 @@ device's reads garbage and writes garbage. A BREAK resets the device. During
 a disconnect fault reads and writes raise :class:`serial.SerialException`; the
 handle stays dead until ``close()`` and ``open()`` again once the device is back.
 The device lives as long as this port object: closing and reopening keeps it.
+It is switched on 100 ms before the port first opens, and whatever it sends
+while the port is closed is lost, so a freshly opened port holds no stale
+bytes (send ``RESET:`` or a BREAK to see the banner).
 """
 
 from __future__ import annotations
@@ -29,6 +32,9 @@ from spotlab.simulators.selspot import SelspotDevice
 from spotlab.simulators.service import build_device, options_from_url
 
 MIN_WAIT_NS = 500_000
+# The device is switched on this long before the port first opens: its power-up
+# banner is over by then, as with a real device that was already running.
+POWER_UP_LEAD_NS = 100_000_000
 MAX_WAIT_NS = 50_000_000
 
 
@@ -53,14 +59,16 @@ class Serial(SerialBase):
             raise SerialException("Port must be configured before it can be used.")
         if self.is_open:
             raise SerialException("Port is already open.")
+        now = time.monotonic_ns()
         if self.device is None:
             try:
-                self.device = build_device(options_from_url(self.portstr))
+                options = options_from_url(self.portstr)
+                self.device = build_device(options, now_ns=now - POWER_UP_LEAD_NS)
             except ValueError as exc:
                 raise SerialException(f"could not open port {self.portstr!r}: {exc}") from exc
-        now = time.monotonic_ns()
         if self.device.link_down(now):
             raise SerialException(f"could not open port {self.portstr!r}: device disconnected")
+        self.device.output(now)  # sent while the port was closed: nobody listened
         self._opened_ns = now
         self._dead = False
         self._bauds = [(now, int(self._baudrate))]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 from _simwire import MS, Host, S, cmd, decode, reply_text, spx
 from spotlab.simulators import wire
@@ -25,12 +26,22 @@ def test_version_reply(host: Host) -> None:
     assert host.ask("VER:0") == "SPX 1.0 SIM00042 4 128"
 
 
-def test_version_reports_the_rig_size(make_device: Callable[..., SelspotDevice]) -> None:
+def test_cameras_beyond_the_rig_are_not_connected(
+    make_device: Callable[..., SelspotDevice],
+) -> None:
     h = Host(make_device(cameras=2))
     h.wait(20 * MS)
-    assert h.ask("VER:0").split()[3] == "2"
-    assert h.ask("CAMS:2") == "OKAY"
-    assert h.ask("CAMS:3") == "ERROR23"
+    assert h.ask("VER:0") == "SPX 1.0 SIM00042 4 128"  # the product's limits, not the rig's
+    h.configure(4, 8, 100_000)
+    h.buf.clear()
+    h.send(cmd("START:"), baud=2_000_000)
+    h.wait(100 * MS)
+    frames = [spx(f["payload"]) for f in decode(bytes(h.buf)).frames if f["type"] == 1]
+    assert frames and all(f["n_cams"] == 4 for f in frames)
+    for f in frames:
+        assert np.all(f["x"][:, 2:] == 0xFFF) and np.all(f["intensity"][:, 2:] == 0)  # type: ignore[index]
+        assert np.all(f["flags"][:, 2:] == wire.FLAG_LOW_SIGNAL)  # type: ignore[index]
+    assert any(np.any(f["flags"][:, :2] & wire.FLAG_VALID) for f in frames)  # type: ignore[index]
 
 
 def test_space_form_needs_no_crc(host: Host) -> None:
