@@ -11,7 +11,7 @@ the device reports it as not seen.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +45,35 @@ class Motion(ABC):
         """All markers at one time ``t`` seconds -> (M, 3) mm."""
         m = np.arange(self.n_markers, dtype=np.int64)
         return self.sample(np.full(self.n_markers, float(t)), m)
+
+
+class CallableMotion(Motion):
+    """Trajectories given by a function ``fn(times (K,)) -> positions (K, M, 3)`` in mm.
+
+    Parameters
+    ----------
+    fn : callable
+        Vectorised over times; NaN where a marker is missing.
+    n_markers : int
+        ``M``.
+    labels : sequence of str, optional
+        Marker labels.
+    """
+
+    def __init__(
+        self,
+        fn: Callable[[F64], npt.ArrayLike],
+        n_markers: int,
+        labels: Sequence[str] | None = None,
+    ) -> None:
+        self.fn = fn
+        self.n_markers = n_markers
+        self.labels = tuple(labels) if labels else tuple(f"M{i}" for i in range(n_markers))
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        t = np.asarray(times, dtype=np.float64)
+        pos = np.asarray(self.fn(t), dtype=np.float64).reshape(t.size, self.n_markers, 3)
+        return np.asarray(pos[np.arange(t.size), np.asarray(markers, dtype=np.int64)])
 
 
 class StaticMarkers(Motion):

@@ -141,12 +141,13 @@ class PsdModel:
         pa = (ambient_centroid[0] - DETECTOR_CENTRE) / HALF_RANGE
         qa = (ambient_centroid[1] - DETECTOR_CENTRE) / HALF_RANGE
         half = np.array([1.0, -1.0])  # electrode + and -
-        # Electrode currents (N, C, 4): x+, x-, y+, y-.
-        led_x = np.einsum("ncs,ncse->nce", power, 0.5 * (1.0 + p[..., None] * half))
-        led_y = np.einsum("ncs,ncse->nce", power, 0.5 * (1.0 + q[..., None] * half))
+        # Electrode currents (N, C, 4): x+, x-, y+, y-; sum_s P_s (1 +- p_s) / 2 per electrode.
+        total = power.sum(axis=-1)
+        moments = np.stack([total, (power * p).sum(axis=-1), (power * q).sum(axis=-1)], axis=-1)
+        mix = 0.5 * np.array([[1.0, 1.0, 1.0, 1.0], [1.0, -1.0, 0.0, 0.0], [0.0, 0.0, 1.0, -1.0]])
         amb = np.concatenate([0.5 * (1.0 + pa * half), 0.5 * (1.0 + qa * half)])  # (4,)
         i_max = self.full_scale / 2.0
-        raw_on = np.concatenate([led_x, led_y], axis=-1) + ambient_on[..., None] * amb
+        raw_on = moments @ mix + ambient_on[..., None] * amb
         on = np.minimum(raw_on, i_max)
         saturated = np.any(raw_on > i_max, axis=-1)
         if ambient_dark is not None:
@@ -175,4 +176,4 @@ class PsdModel:
             | np.where(near, wire.FLAG_NEAR_EDGE, 0)
         ).astype(np.uint8)
         intensity = np.clip(np.rint(level), 0, 255).astype(np.uint8)
-        return PsdReading(x=x, y=y, intensity=intensity, flags=flags, power=power.sum(axis=-1))
+        return PsdReading(x=x, y=y, intensity=intensity, flags=flags, power=total)

@@ -249,7 +249,7 @@ class Scene:
         """World points (..., 3) -> u, v, distance, cos_axis, in_view, each (..., C)."""
         Xc = np.einsum("cij,...j->...ci", self._R, X) + self._t
         z = Xc[..., 2]
-        dist = np.linalg.norm(Xc, axis=-1)
+        dist = np.sqrt(np.einsum("...i,...i->...", Xc, Xc))
         with np.errstate(divide="ignore", invalid="ignore"):
             xn = Xc[..., 0] / z
             yn = Xc[..., 1] / z

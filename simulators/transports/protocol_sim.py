@@ -31,7 +31,7 @@ from spotlab.simulators.line import garble
 from spotlab.simulators.selspot import SelspotDevice
 from spotlab.simulators.service import build_device, options_from_url
 
-MIN_WAIT_NS = 500_000
+MIN_WAIT_NS = 1_000_000
 # The device is switched on this long before the port first opens: its power-up
 # banner is over by then, as with a real device that was already running.
 POWER_UP_LEAD_NS = 100_000_000

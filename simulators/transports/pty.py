@@ -35,7 +35,7 @@ from spotlab.simulators.line import garble
 from spotlab.simulators.selspot import SelspotDevice
 
 TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on Linux
-MIN_WAIT_S = 0.0005
+MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
 MAX_PENDING = 1 << 16
 

@@ -19,7 +19,7 @@ from types import TracebackType
 
 from spotlab.simulators.selspot import SelspotDevice
 
-MIN_WAIT_S = 0.0005
+MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
 MAX_PENDING = 1 << 20
 
