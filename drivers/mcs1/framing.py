@@ -22,6 +22,7 @@ falls back to the spec's one-candidate-at-a-time procedure.
 from __future__ import annotations
 
 import binascii
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -39,6 +40,8 @@ OVERHEAD = 12
 EVENT_TYPE = 0x7F
 PROTOCOL_VERSION = 1
 MAX_PAYLOAD = 4096
+#: Event frames kept for :meth:`FrameDecoder.take_events` (older ones are dropped).
+MAX_EVENTS = 256
 #: Fewest back-to-back frames for which the vectorised check pays off.
 _TRAIN_MIN = 16
 
@@ -116,8 +119,9 @@ class FrameDecoder:
     ----------
     stats : LinkStats
         The counters.
-    events : list of EventFrame
-        Event frames received and not yet taken (see :meth:`take_events`).
+    events : deque of EventFrame
+        Event frames received and not yet taken (see :meth:`take_events`); the
+        oldest are dropped beyond :data:`MAX_EVENTS`.
     banner_seen : bool
         Set when the reset banner ``RESET7DB2\\r`` showed up between frames
         (the device reset itself); the owner clears it.
@@ -134,7 +138,7 @@ class FrameDecoder:
         self.payload_len = payload_len
         self.frame_len = payload_len + OVERHEAD
         self.stats = stats if stats is not None else LinkStats()
-        self.events: list[EventFrame] = []
+        self.events: deque[EventFrame] = deque(maxlen=MAX_EVENTS)
         self.banner_seen = False
         self._c0, self._tables = _header_crc_tables(frame_type, payload_len)
         self._buf = bytearray()
@@ -153,7 +157,8 @@ class FrameDecoder:
 
     def take_events(self) -> list[EventFrame]:
         """The event frames received so far, removed from the decoder."""
-        events, self.events = self.events, []
+        events = list(self.events)
+        self.events.clear()
         return events
 
     def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBatch:
@@ -171,10 +176,7 @@ class FrameDecoder:
         FrameBatch
             Complete, checked data frames (possibly none). Never raises on bad bytes.
         """
-        if data:
-            self._buf += data
-            self._chunk_ends.append(self._base + len(self._buf))
-            self._chunk_ns.append(int(arrival_ns))
+        self._append(data, arrival_ns)
         if len(self._buf) < self._need:
             return self._empty()
         return self._parse(final=False)
@@ -193,10 +195,7 @@ class FrameDecoder:
             As :meth:`feed` after the last chunk, in one decoding pass.
         """
         for data, arrival_ns in chunks:
-            if data:
-                self._buf += data
-                self._chunk_ends.append(self._base + len(self._buf))
-                self._chunk_ns.append(int(arrival_ns))
+            self._append(data, arrival_ns)
         if len(self._buf) < self._need:
             return self._empty()
         return self._parse(final=False)
@@ -220,6 +219,12 @@ class FrameDecoder:
         self._skip_tail = b""
 
     # -- internals -------------------------------------------------------------
+    def _append(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> None:
+        if data:
+            self._buf += data
+            self._chunk_ends.append(self._base + len(self._buf))
+            self._chunk_ns.append(int(arrival_ns))
+
     def _empty(self) -> FrameBatch:
         return FrameBatch(
             np.zeros((0, self.frame_len), dtype=np.uint8), np.zeros(0, dtype=np.int64)
