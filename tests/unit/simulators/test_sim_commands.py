@@ -310,3 +310,21 @@ def test_space_and_crc_forms_agree(host: Host, verb: str) -> None:
     a = host.ask(verb)
     b = reply_text(host.ask_raw("", raw=verb.replace(":", " ").encode() + b"\r"))
     assert a.split()[0] == b.split()[0]
+
+
+def test_device_emits_the_golden_replies_and_event_frame(
+    make_device: Callable[..., SelspotDevice],
+) -> None:
+    h = Host(make_device(mark_simulated=False))
+    assert h.wait(20 * MS) == bytes.fromhex("52 45 53 45 54 37 44 42 32 0D")  # banner
+    assert h.ask_raw("VER:0") == b"SPX 1.0 SIM00042 4 128C2DE\r"
+    assert h.ask_raw("START:") == bytes.fromhex("45 52 52 4F 52 38 32") + wire.reply("ERROR82")[7:]
+    assert h.ask_raw("COMM:8") == bytes.fromhex("4F 4B 41 59 32 36 43 46 0D")
+    h.send(cmd("LEDT:008005C01140"), baud=2_000_000)
+    h.send(cmd("START:"), baud=2_000_000)
+    h.wait(50 * MS)
+    h.buf.clear()
+    h.send(cmd("STOP:"), baud=2_000_000)
+    h.wait(50 * MS)
+    golden = bytes.fromhex("A5 5A 7F 10 00 00 09 00 ED D8 4F 4B 41 59 32 36 43 46 0D 5C D3")
+    assert bytes(h.buf).endswith(golden)
