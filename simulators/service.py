@@ -8,6 +8,7 @@ the equivalent in-process ``sim://`` URL (for ``serial.serial_for_url``).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,6 +19,11 @@ from spotlab.simulators.faults import FaultInjector
 from spotlab.simulators.motions import MOTIONS, make_motion
 from spotlab.simulators.scene import Ambient, Mirror, Scene, ring_rig
 from spotlab.simulators.selspot import SelspotDevice
+
+# Served devices are switched on this long before their port exists: their
+# power-up banner is over by then, as with a device that was already running
+# when the host opened its port (a host resets it to see the banner).
+POWER_UP_LEAD_NS = 100_000_000
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -191,7 +197,7 @@ def serve_pty(options: SelspotSimOptions) -> PtyServer:
     """Start serving a simulated device on a pseudo-terminal; ``.path`` is the stable link."""
     from spotlab.simulators.transports.pty import PtyServer
 
-    server = PtyServer(build_device(options))
+    server = PtyServer(build_device(options, now_ns=time.monotonic_ns() - POWER_UP_LEAD_NS))
     server.start()
     return server
 
@@ -200,6 +206,8 @@ def serve_tcp(options: SelspotSimOptions, port: int = 0) -> TcpServer:
     """Start serving a simulated device on 127.0.0.1:``port`` (0: any); ``.url`` is ``socket://``."""
     from spotlab.simulators.transports.tcp import TcpServer
 
-    server = TcpServer(build_device(options), port=port)
+    server = TcpServer(
+        build_device(options, now_ns=time.monotonic_ns() - POWER_UP_LEAD_NS), port=port
+    )
     server.start()
     return server

@@ -29,12 +29,9 @@ import numpy as np
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 from spotlab.simulators.line import garble
 from spotlab.simulators.selspot import SelspotDevice
-from spotlab.simulators.service import build_device, options_from_url
+from spotlab.simulators.service import POWER_UP_LEAD_NS, build_device, options_from_url
 
 MIN_WAIT_NS = 1_000_000
-# The device is switched on this long before the port first opens: its power-up
-# banner is over by then, as with a real device that was already running.
-POWER_UP_LEAD_NS = 100_000_000
 MAX_WAIT_NS = 50_000_000
 
 

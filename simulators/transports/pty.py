@@ -98,6 +98,7 @@ class PtyServer:
         """Open the pseudo-terminal and start serving."""
         if self._thread is not None:
             raise RuntimeError("PtyServer already started")
+        self.device.output(time.monotonic_ns())  # sent before the port existed: lost
         self._open_pty()
         self._thread = threading.Thread(target=self._run, name="spotlab-sim-pty", daemon=True)
         self._thread.start()

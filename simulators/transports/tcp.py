@@ -63,6 +63,7 @@ class TcpServer:
         """Start serving."""
         if self._thread is not None:
             raise RuntimeError("TcpServer already started")
+        self.device.output(time.monotonic_ns())  # sent before the port existed: lost
         self._thread = threading.Thread(target=self._run, name="spotlab-sim-tcp", daemon=True)
         self._thread.start()
         return self
