@@ -21,6 +21,7 @@ import os
 import time
 
 import numpy as np
+
 from spotlab.drivers.selspot import SelspotDecoder
 
 N_CAMS, N_LEDS = 4, 32

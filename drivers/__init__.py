@@ -11,9 +11,8 @@ from __future__ import annotations
 import importlib
 from importlib.metadata import entry_points
 
-from spotlab.drivers.base import DeviceInfo, Driver
-
 from spotlab.core.errors import ConfigurationError
+from spotlab.drivers.base import DeviceInfo, Driver
 
 DRIVERS: dict[str, tuple[str, str]] = {
     "selspot": ("spotlab.drivers.selspot", "SelspotDriver"),

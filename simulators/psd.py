@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
 from spotlab.simulators import wire
 from spotlab.simulators.scene import DETECTOR_CENTRE, DETECTOR_MAX, Spots
 

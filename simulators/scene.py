@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+
 from spotlab.simulators.motions import Motion
 
 F64 = npt.NDArray[np.float64]

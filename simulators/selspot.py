@@ -19,6 +19,7 @@ from collections import deque
 from pathlib import Path
 
 import numpy as np
+
 from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import CommandError, LineAssembler, parse_line

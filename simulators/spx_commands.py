@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
 from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+
 from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.psd import PsdModel, PsdReading

@@ -28,11 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from spotlab.drivers.mcs1.commands import BANNER
 
 from spotlab.core.crc import CRC16_INIT
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.stats import LinkStats
+from spotlab.drivers.mcs1.commands import BANNER
 
 SYNC = b"\xa5\x5a"
 HEADER_BYTES = 10

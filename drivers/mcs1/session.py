@@ -22,6 +22,8 @@ from __future__ import annotations
 import logging
 import time
 
+from spotlab.core.errors import DeviceTimeout, ProtocolError
+from spotlab.core.stats import LinkStats
 from spotlab.drivers.mcs1.commands import (
     BANNER,
     BAUD_CODES,
@@ -32,9 +34,6 @@ from spotlab.drivers.mcs1.commands import (
     parse_reply,
 )
 from spotlab.drivers.mcs1.link import SerialLink
-
-from spotlab.core.errors import DeviceTimeout, ProtocolError
-from spotlab.core.stats import LinkStats
 
 log = logging.getLogger(__name__)
 

@@ -20,9 +20,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from spotlab.drivers.mcs1.commands import BAUD_CODES
-
 from spotlab.core.errors import BandwidthError, ConfigurationError
+from spotlab.drivers.mcs1.commands import BAUD_CODES
 
 MAX_CAMERAS = 4
 MAX_LEDS = 128

@@ -23,9 +23,21 @@ from collections.abc import Iterable
 from typing import Any
 
 from serial.tools import list_ports
+
+from spotlab.core.errors import (
+    ConfigurationError,
+    DeviceDisconnected,
+    DeviceError,
+    DeviceTimeout,
+    ProtocolError,
+)
+from spotlab.core.frames import FrameBlock
+from spotlab.core.streams import StreamSpec
+from spotlab.core.wire import LinkEventKind
 from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.mcs1.commands import (
     DeviceConfigurationError,
+    Reply,
     encode_command,
     parse_reply,
 )
@@ -40,17 +52,6 @@ from spotlab.drivers.selspot.protocol import (
     SelspotDecoder,
     parse_version,
 )
-
-from spotlab.core.errors import (
-    ConfigurationError,
-    DeviceDisconnected,
-    DeviceError,
-    DeviceTimeout,
-    ProtocolError,
-)
-from spotlab.core.frames import FrameBlock
-from spotlab.core.streams import StreamSpec
-from spotlab.core.wire import LinkEventKind
 
 log = logging.getLogger(__name__)
 
@@ -254,6 +255,27 @@ class SelspotDriver(Driver):
         self._last_frame_ns = self._last_rx_ns = now
         self._tap_event("started")
 
+    def command(self, text: str) -> Reply:
+        """Send one command (``"VERB:ARGS"`` or ``"VERB"``) and return the device's reply.
+
+        Works while idle and while streaming (the reply then comes in an event
+        frame; data frames that arrive meanwhile are kept for :meth:`recv`).
+
+        Raises
+        ------
+        DeviceError
+            With the device's code when it answers ``ERRORxx``.
+        DeviceTimeout
+            If no reply comes within ``reply_timeout``.
+        """
+        verb, _, args = text.partition(":")
+        if not self._link.is_open:
+            raise DeviceError(f"{self.port} is not open: call start() first")
+        if not self._streaming:
+            return self._channel.transact(verb, args)
+        self._link.write(encode_command(verb, args))
+        return self._await_event_reply(f"{verb}:{args}")
+
     def _stop(self) -> None:
         if self._recovering is not None:
             self._recovering = None
@@ -263,13 +285,13 @@ class SelspotDriver(Driver):
         self._streaming = False
         try:
             self._link.write(encode_command("STOP"))
-            self._await_stop_reply()
+            self._await_event_reply("STOP:", okay_only=True)
         except DeviceDisconnected as exc:
             log.warning("%s: port lost while stopping: %s", self.port, exc)
         self._tap_event("stopped")
 
-    def _await_stop_reply(self) -> None:
-        """Decode frames until the ``OKAY`` event frame; keep the frames for ``recv``."""
+    def _await_event_reply(self, command: str, okay_only: bool = False) -> Reply:
+        """Decode frames until the reply's event frame; keep the frames for ``recv``."""
         deadline = time.monotonic() + self.reply_timeout
         while True:
             self._read_and_decode(deadline - time.monotonic())
@@ -277,14 +299,16 @@ class SelspotDriver(Driver):
                 try:
                     reply = parse_reply(event.payload)
                 except ProtocolError as exc:
-                    log.warning("%s: while stopping: %s", self.port, exc)
+                    log.warning(
+                        "%s: while waiting for the reply to %s: %s", self.port, command, exc
+                    )
                     continue
-                reply.raise_for_error("STOP:")
-                if reply.kind == "okay":
-                    return
+                reply.raise_for_error(command)
+                if reply.kind == "okay" or not okay_only:
+                    return reply
             if time.monotonic() >= deadline:
                 raise DeviceTimeout(
-                    f"no OKAY to STOP: from {self.port} within {self.reply_timeout:g} s"
+                    f"no reply to {command} from {self.port} within {self.reply_timeout:g} s"
                 )
 
     def _close(self) -> None:

@@ -17,13 +17,13 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
-from spotlab.drivers.mcs1.sequence import SequenceTracker
-from spotlab.drivers.selspot.config import SelspotConfig, led_table
 
 from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
+from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.selspot.config import SelspotConfig, led_table
 
 log = logging.getLogger(__name__)
 

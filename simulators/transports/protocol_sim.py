@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+
 from spotlab.simulators.line import garble
 from spotlab.simulators.selspot import SelspotDevice
 from spotlab.simulators.service import POWER_UP_LEAD_NS, build_device, options_from_url

@@ -31,6 +31,7 @@ from pathlib import Path
 from types import TracebackType
 
 import numpy as np
+
 from spotlab.simulators.line import garble
 from spotlab.simulators.selspot import SelspotDevice
 

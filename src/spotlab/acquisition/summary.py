@@ -30,7 +30,10 @@ class StreamSummary:
     frames : int
         Valid frames decoded.
     lost_frames : int
-        Frames missing by sequence number (decoder count).
+        Frames missing by sequence and frame number (decoder count).
+    device_dropped : int
+        The part of ``lost_frames`` the device dropped itself (FIFO overflow);
+        ``lost_frames - device_dropped`` were lost on the link.
     crc_errors, resyncs : int
         Checksum failures and resynchronisations (decoder counts).
     gaps : int
@@ -78,6 +81,7 @@ class StreamSummary:
     device_resets: int = 0
     tx_bytes: int = 0
     duplicates: int = 0
+    device_dropped: int = 0
     bytes_skipped: int = 0
     undecoded_bytes: int = 0
     decode_errors: int = 0
@@ -220,6 +224,7 @@ def _stream_summary(state: StreamState, timing: FrameTiming | None) -> StreamSum
         device_resets=state.device_resets,
         tx_bytes=state.tx_bytes,
         duplicates=stats.duplicates,
+        device_dropped=stats.device_dropped,
         bytes_skipped=stats.bytes_skipped,
         undecoded_bytes=state.undecoded_bytes,
         decode_errors=state.decode_errors,

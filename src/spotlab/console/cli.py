@@ -21,15 +21,8 @@ from spotlab.console.errors import (
 )
 from spotlab.core.errors import SpotlabError
 
-# Subcommand name -> module in spotlab.console.commands with add_parser(subparsers) and run(args).
-COMMANDS: dict[str, str] = {
-    "devices": "devices",
-    "sim": "sim",
-    "record": "record",
-    "info": "info",
-    "demo": "demo",
-    "udev": "udev",
-}
+# Modules of spotlab.console.commands, each with add_parser(subparsers) and run(args).
+COMMANDS: tuple[str, ...] = ("devices", "sim", "record", "info", "demo", "udev")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,8 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"spotlab {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for name, module_name in COMMANDS.items():
-        module = importlib.import_module(f"spotlab.console.commands.{module_name}")
+    for name in COMMANDS:
+        module = importlib.import_module(f"spotlab.console.commands.{name}")
         module.add_parser(sub)
     return parser
 

@@ -32,7 +32,9 @@ def decoder_for(metadata: dict[str, Any]) -> StreamDecoder:
         module = importlib.import_module(load_driver(family).__module__)
     factory = getattr(module, "decoder_from_metadata", None)
     if factory is None:
-        raise RecordingError(f"driver {family!r} cannot decode recordings (no decoder_from_metadata)")
+        raise RecordingError(
+            f"driver {family!r} cannot decode recordings (no decoder_from_metadata)"
+        )
     try:
         decoder: StreamDecoder = factory(metadata)
     except (KeyError, TypeError, ValueError) as exc:

@@ -22,7 +22,11 @@ class Progress:
     """
 
     def __init__(
-        self, label: str, total: float | None = None, stream: TextIO | None = None, force: bool = False
+        self,
+        label: str,
+        total: float | None = None,
+        stream: TextIO | None = None,
+        force: bool = False,
     ) -> None:
         self.label = label
         self.total = total

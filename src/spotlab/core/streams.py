@@ -113,4 +113,6 @@ class StreamSpec:
                 metadata=dict(d.get("metadata", {})),
             )
         except (KeyError, TypeError, ValueError) as exc:
-            raise ConfigurationError(f"stream description is incomplete or malformed: {exc}") from exc
+            raise ConfigurationError(
+                f"stream description is incomplete or malformed: {exc}"
+            ) from exc

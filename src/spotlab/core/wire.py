@@ -36,7 +36,9 @@ class WireTap(Protocol):
     def on_tx(self, stream: str, data: bytes, sent_ns: int) -> None:
         """Bytes written to the device."""
 
-    def on_event(self, stream: str, kind: LinkEventKind, detail: dict[str, object], t_ns: int) -> None:
+    def on_event(
+        self, stream: str, kind: LinkEventKind, detail: dict[str, object], t_ns: int
+    ) -> None:
         """A link event, with a JSON-safe detail dictionary."""
 
 
@@ -52,7 +54,7 @@ class StreamDecoder(Protocol):
     stats: LinkStats
 
     def feed(self, data: bytes, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered); return the complete frames, maybe none."""
+        """Decode ``data`` after what is buffered; return the complete frames (maybe none)."""
 
     def mark_discontinuity(self) -> None:
         """The link was broken (reset, reconnect): do not join sequence numbers across it."""

@@ -42,7 +42,9 @@ def test_sample_ticks_add_slot_offsets_to_frame_ticks() -> None:
         flags=np.zeros((2, 3, 2), np.uint8),
         status=np.zeros(2, np.uint16),
     )
-    np.testing.assert_allclose(block.sample_ticks(_spec()), [[1050, 1150, 1250], [6050, 6150, 6250]])
+    np.testing.assert_allclose(
+        block.sample_ticks(_spec()), [[1050, 1150, 1250], [6050, 6150, 6250]]
+    )
 
 
 def test_spec_round_trips_through_a_dict() -> None:

@@ -6,6 +6,8 @@ import logging
 
 import pytest
 from _spx_wire import line
+
+from spotlab.core.errors import BandwidthError, ConfigurationError, DeviceError, ProtocolError
 from spotlab.drivers.mcs1.commands import (
     BANNER,
     BAUD_CODES,
@@ -17,8 +19,6 @@ from spotlab.drivers.mcs1.commands import (
     parse_reply,
 )
 from spotlab.drivers.mcs1.session import find_reply
-
-from spotlab.core.errors import BandwidthError, ConfigurationError, DeviceError, ProtocolError
 
 
 def test_crc_check_value() -> None:

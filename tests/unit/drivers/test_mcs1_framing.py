@@ -8,9 +8,9 @@ import random
 import numpy as np
 import pytest
 from _spx_wire import GOLDEN_EVENT_OKAY, GOLDEN_SPX_FRAME, SpxStream, event_frame, mcs1_frame
-from spotlab.drivers.mcs1.framing import FrameDecoder, _header_crc_tables
 
 from spotlab.core.errors import ConfigurationError
+from spotlab.drivers.mcs1.framing import FrameDecoder, _header_crc_tables
 
 
 def accounted(dec: FrameDecoder, fed: int) -> bool:

@@ -12,8 +12,6 @@ from pathlib import Path
 import pytest
 import serial
 from _spx_wire import line
-from spotlab.drivers.mcs1.link import SerialLink, open_error
-from spotlab.drivers.mcs1.session import CommandChannel
 
 from spotlab.core.errors import (
     ConfigurationError,
@@ -23,6 +21,8 @@ from spotlab.core.errors import (
     DeviceTimeout,
     ProtocolError,
 )
+from spotlab.drivers.mcs1.link import SerialLink, open_error
+from spotlab.drivers.mcs1.session import CommandChannel
 
 
 @pytest.fixture

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import pytest
+
+from spotlab.core.errors import BandwidthError, ConfigurationError
 from spotlab.drivers.mcs1.commands import encode_command
 from spotlab.drivers.selspot import SelspotConfig
 from spotlab.drivers.selspot.config import led_table
-
-from spotlab.core.errors import BandwidthError, ConfigurationError
 
 
 def test_spec_example_needs_comm_8() -> None:

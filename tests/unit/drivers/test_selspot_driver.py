@@ -10,9 +10,6 @@ import numpy as np
 import pytest
 from _pty_peer import SpxPeer
 from _spx_wire import SpxStream, event_frame, line
-from spotlab.drivers import load_driver
-from spotlab.drivers.mcs1.commands import DeviceBandwidthError, DeviceConfigurationError
-from spotlab.drivers.selspot import SelspotDriver, decoder_from_metadata
 
 from spotlab.core.errors import (
     BandwidthError,
@@ -22,6 +19,9 @@ from spotlab.core.errors import (
     ProtocolError,
 )
 from spotlab.core.frames import FrameBlock
+from spotlab.drivers import load_driver
+from spotlab.drivers.mcs1.commands import DeviceBandwidthError, DeviceConfigurationError
+from spotlab.drivers.selspot import SelspotDriver, decoder_from_metadata
 
 
 class Tap:

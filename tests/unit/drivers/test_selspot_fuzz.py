@@ -14,13 +14,13 @@ import numpy as np
 from _spx_wire import SpxStream, event_frame
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
+from spotlab.core.errors import DeviceError, ProtocolError
+from spotlab.core.frames import FrameBlock
 from spotlab.drivers.mcs1 import framing
 from spotlab.drivers.mcs1.commands import parse_reply
 from spotlab.drivers.mcs1.session import find_reply
 from spotlab.drivers.selspot import SelspotDecoder
-
-from spotlab.core.errors import DeviceError, ProtocolError
-from spotlab.core.frames import FrameBlock
 
 EXAMPLES = int(os.environ.get("SPOTLAB_FUZZ_EXAMPLES", "300"))
 FUZZ = settings(

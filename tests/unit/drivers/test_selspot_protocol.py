@@ -15,11 +15,11 @@ from _spx_wire import (
     line,
     mcs1_frame,
 )
-from spotlab.drivers.selspot import SelspotConfig, SelspotDecoder, decoder_from_metadata
-from spotlab.drivers.selspot.protocol import parse_version
 
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
+from spotlab.drivers.selspot import SelspotConfig, SelspotDecoder, decoder_from_metadata
+from spotlab.drivers.selspot.protocol import parse_version
 
 N_FRAMES = 20
 J = 10  # the frame the corruption hits

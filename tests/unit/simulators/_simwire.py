@@ -11,6 +11,7 @@ import struct
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from spotlab.simulators.selspot import SelspotDevice
 
 

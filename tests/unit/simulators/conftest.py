@@ -6,6 +6,7 @@ from collections.abc import Callable
 
 import pytest
 from _simwire import T0, Host
+
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import FaultInjector
 from spotlab.simulators.motions import make_motion

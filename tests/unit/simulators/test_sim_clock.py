@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _simwire import MS, T0, Host, S, cmd, decode, reply_text, spx
+
+from spotlab.core.ticks import unwrap_counter
 from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.selspot import SelspotDevice
-
-from spotlab.core.ticks import unwrap_counter
 
 
 def test_offset_and_drift_in_ticks() -> None:

@@ -7,6 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 from _simwire import MS, Host, S, cmd, decode, reply_text, spx
+
 from spotlab.simulators import wire
 from spotlab.simulators.selspot import SelspotDevice
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 from _simwire import MS, Decoded, Host, cmd, decode, reply_text, spx
+
 from spotlab.simulators import wire
 from spotlab.simulators.faults import FaultInjector, FaultLog, FaultSpec, parse_schedule
 from spotlab.simulators.selspot import SelspotDevice

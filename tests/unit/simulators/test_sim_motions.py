@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _simwire import Host, cmd, decode, spx
+
 from spotlab.simulators.motions import (
     Concat,
     Gait,

@@ -7,6 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 from _simwire import MS, T0, Host, cmd, decode
+
 from spotlab.simulators import wire
 from spotlab.simulators.line import BIT_NS, TxLine, garble
 from spotlab.simulators.selspot import SelspotDevice

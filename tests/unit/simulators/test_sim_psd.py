@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from spotlab.simulators import wire
 from spotlab.simulators.motions import StaticMarkers
 from spotlab.simulators.psd import PsdModel, PsdReading

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _simwire import MS, Host, cmd
+
 from spotlab.simulators.motions import CallableMotion, Concat
 from spotlab.simulators.service import (
     SelspotSimOptions,

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _simwire import MS, T0, Host, S, cmd, decode, spx
+
 from spotlab.simulators import wire
 from spotlab.simulators.motions import StaticMarkers, WandDance
 from spotlab.simulators.psd import PsdModel

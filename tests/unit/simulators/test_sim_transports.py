@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import serial
-import spotlab.simulators  # noqa: F401 - registers sim://
 from _simwire import cmd, decode, reply_text, spx
+
+import spotlab.simulators  # noqa: F401 - registers sim://
 from spotlab.simulators.service import SelspotSimOptions, serve_pty, serve_tcp
 
 BANNER = b"RESET7DB2\r"

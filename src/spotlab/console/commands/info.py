@@ -29,7 +29,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(data))
         return 0
-    print(f"{args.file}: {'complete' if data.get('complete') else 'incomplete (recording was cut)'}")
+    print(
+        f"{args.file}: {'complete' if data.get('complete') else 'incomplete (recording was cut)'}"
+    )
     if data.get("truncated_bytes"):
         print(f"  cut short: last {data['truncated_bytes']} bytes were a partial record")
     if data.get("corrupt_records"):

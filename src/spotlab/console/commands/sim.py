@@ -23,14 +23,22 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("family", choices=["selspot"], help="device family")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--pty", action="store_true", help="serve on a real pseudo-terminal (default)")
     where.add_argument(
-        "--tcp", nargs="?", const=0, type=int, metavar="PORT",
+        "--pty", action="store_true", help="serve on a real pseudo-terminal (default)"
+    )
+    where.add_argument(
+        "--tcp",
+        nargs="?",
+        const=0,
+        type=int,
+        metavar="PORT",
         help="serve on 127.0.0.1:PORT (0 or omitted: any free port)",
     )
     p.add_argument("--cameras", type=int, default=2, help="cameras, 1-4 (default 2)")
     p.add_argument("--leds", type=int, default=8, help="LEDs, 1-128 (default 8)")
-    p.add_argument("--rate", type=float, default=100.0, help="frame rate the scene is built for, Hz")
+    p.add_argument(
+        "--rate", type=float, default=100.0, help="frame rate the scene is built for, Hz"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of noise, motion and random faults")
     p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
     p.add_argument("--faults", default="", help="fault schedule, e.g. 'bitflip@1.5,drop@2,reset@6'")
@@ -39,7 +47,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--clock-drift-ppm", type=float, default=0.0, metavar="PPM")
     p.add_argument("--clock-jitter", type=float, default=0.0, metavar="SECONDS")
     p.add_argument(
-        "--motion", default="wand",
+        "--motion",
+        default="wand",
         help="wand, cluster, gait, or a C3D file whose markers move the LEDs",
     )
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
@@ -83,7 +92,11 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
-    server = service.serve_tcp(options, port=args.tcp) if args.tcp is not None else service.serve_pty(options)
+    server = (
+        service.serve_tcp(options, port=args.tcp)
+        if args.tcp is not None
+        else service.serve_pty(options)
+    )
     try:
         print(server.url if args.tcp is not None else server.path, flush=True)
         stop.wait(args.seconds)
