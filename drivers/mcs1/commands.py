@@ -89,9 +89,10 @@ def encode_command(verb: str, args: str = "") -> bytes:
 
     Notes
     -----
-    mcs1.md §3 limits a command to 255 bytes before the CR, yet selspot.md §2
-    allows an ``LEDT`` table of 128 entries (517 bytes). The command is built
-    whatever its length; the device answers ``ERROR02`` if it keeps the limit.
+    mcs1.md §3 limits a command to 255 bytes before the CR unless its family
+    allows more for a verb (SPX: ``LEDT`` up to 1024, so 128 entries fit). The
+    command is built whatever its length; the device answers ``ERROR02`` when
+    it is too long.
     """
     text = f"{verb}:{args}"
     if not verb.isalnum() or not text.isascii() or not text.isprintable():

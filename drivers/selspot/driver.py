@@ -224,17 +224,7 @@ class SelspotDriver(Driver):
                 f"configured {c.cameras} cameras and {c.n_leds} LEDs"
             )
         for verb, args in c.commands():
-            try:
-                self._channel.transact(verb, args)
-            except DeviceError as exc:
-                if verb == "LEDT" and exc.code == 0x02:
-                    raise DeviceConfigurationError(
-                        f"{exc}: an LED table of {c.n_leds} entries makes a "
-                        f"{len(encode_command(verb, args)) - 1}-byte command and MCS-1 "
-                        "accepts 255 (61 entries); see docs/drivers.md",
-                        code=exc.code,
-                    ) from exc
-                raise
+            self._channel.transact(verb, args)
         self._tap_event("configured", config=c.to_dict())
         try:
             self._channel.transact("START")
