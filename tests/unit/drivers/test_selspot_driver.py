@@ -171,7 +171,7 @@ def test_configuration_refused_by_the_device(tmp_path: Path) -> None:
 def test_led_table_refused_as_too_long_names_the_code(tmp_path: Path) -> None:
     with SpxPeer(tmp_path, answers={"LEDT": line("ERROR02")}) as peer:
         driver = make_driver(peer.path, cameras=1, leds=100, rate_hz=50)
-        with pytest.raises(DeviceError, match="LEDT.*too long") as info:
+        with pytest.raises(DeviceError, match=r"LEDT.*too long") as info:
             driver.start()
         driver.close()
     assert info.value.code == 0x02
