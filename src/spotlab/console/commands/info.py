@@ -37,9 +37,17 @@ def run(args: argparse.Namespace) -> int:
     if data.get("corrupt_records"):
         print(f"  damaged records skipped: {data['corrupt_records']}")
     for s in data["streams"]:
+        if s.get("undecodable"):
+            print(f"  {s['name']}: not decoded: {s['undecodable']}")
+            continue
         print(
             f"  {s['name']}: {s['frames']} frames in {s['duration_s']:.3f} s "
             f"({s['rate_hz']:.2f} Hz), lost {s['lost_frames']}, CRC errors {s['crc_errors']}, "
             f"resyncs {s['resyncs']}, gaps {s['gaps']}"
         )
+        if s.get("reconnects") or s.get("device_dropped"):
+            print(
+                f"      device FIFO drops {s.get('device_dropped', 0)}, "
+                f"reconnects {s['reconnects']}, device resets {s.get('device_resets', 0)}"
+            )
     return 0
