@@ -13,6 +13,8 @@ import pytest
 
 from spotlab.console import udev
 from spotlab.console.udev import PlannedFile, UdevError, install, plan_install
+from spotlab.console.udev import installer as udev_installer
+from spotlab.console.udev import shipped as udev_shipped
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -74,7 +76,7 @@ def test_rules_are_found_through_importlib_resources(
         (package / rules.name).write_text(rules.read_text())
     (package / "99-extra.rules").write_text('KERNEL=="x", TAG+="extra"\n')
     monkeypatch.syspath_prepend(str(package.parent))
-    monkeypatch.setattr(udev, "RULES_PACKAGE", "spotlab_fake_udev_data")
+    monkeypatch.setattr(udev_shipped, "RULES_PACKAGE", "spotlab_fake_udev_data")
     try:
         assert Path(str(udev.rules_dir())) == package
         assert "99-extra.rules" in udev.shipped_rules()
@@ -83,13 +85,13 @@ def test_rules_are_found_through_importlib_resources(
 
 
 def test_rules_fall_back_to_the_checkout(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(udev, "RULES_PACKAGE", "spotlab_no_such_package_for_udev")
+    monkeypatch.setattr(udev_shipped, "RULES_PACKAGE", "spotlab_no_such_package_for_udev")
     assert Path(str(udev.rules_dir())) == ROOT / "udev"
 
 
 def test_missing_rules_are_a_clear_error(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(udev, "RULES_PACKAGE", "spotlab_no_such_package_for_udev")
-    monkeypatch.setattr(udev, "_checkout_rules_dir", lambda: tmp_path)
+    monkeypatch.setattr(udev_shipped, "RULES_PACKAGE", "spotlab_no_such_package_for_udev")
+    monkeypatch.setattr(udev_shipped, "_checkout_rules_dir", lambda: tmp_path)
     with pytest.raises(UdevError, match="reinstall spotlab"):
         plan_install()
 
@@ -117,7 +119,7 @@ def test_dry_run_into_a_missing_folder_creates_nothing(tmp_path: Path) -> None:
 
 
 def test_dry_run_says_root_is_needed(target: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(udev, "_writable", lambda folder: False)
+    monkeypatch.setattr(udev_installer, "_writable", lambda folder: False)
     result = install(plan_install("uaccess", target))
     assert result.writable is False
     assert 'sudo "$(command -v spotlab)" udev install --policy uaccess' in result.to_text()
@@ -157,7 +159,7 @@ def test_yes_into_a_missing_folder_fails(tmp_path: Path) -> None:
 def test_yes_into_an_unwritable_folder_suggests_sudo(
     target: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(udev, "_writable", lambda folder: False)
+    monkeypatch.setattr(udev_installer, "_writable", lambda folder: False)
     with pytest.raises(UdevError, match=r"permission denied.*sudo"):
         install(plan_install("plugdev", target), yes=True)
     assert _listing(target) == []
@@ -169,7 +171,7 @@ def test_permission_error_while_writing_suggests_sudo(
     def refuse(path: Path, content: str) -> None:
         raise PermissionError(13, "Permission denied", str(path))
 
-    monkeypatch.setattr(udev, "_atomic_write", refuse)
+    monkeypatch.setattr(udev_installer, "_atomic_write", refuse)
     with pytest.raises(UdevError, match="sudo"):
         install(plan_install("uaccess", target), yes=True)
 
@@ -181,7 +183,7 @@ def test_other_policy_already_installed_is_reported(target: Path) -> None:
 
 
 def test_missing_plugdev_group_is_reported(target: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(udev, "_group_exists", lambda name: False)
+    monkeypatch.setattr(udev_installer, "_group_exists", lambda name: False)
     result = install(plan_install("plugdev", target))
     assert any("group plugdev does not exist" in w for w in result.warnings)
 
@@ -198,7 +200,7 @@ def test_plan_from_several_folders_is_refused(tmp_path: Path) -> None:
 def test_yes_does_not_reload_unless_asked(
     target: Path, fake_udevadm: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(udev, "LIVE_RULES_DIRS", (target,))
+    monkeypatch.setattr(udev_installer, "LIVE_RULES_DIRS", (target,))
     result = install(plan_install("uaccess", target), yes=True)
     assert not fake_udevadm.exists()
     assert result.commands == []
@@ -208,7 +210,7 @@ def test_yes_does_not_reload_unless_asked(
 def test_reload_runs_udevadm_for_a_live_folder(
     target: Path, fake_udevadm: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(udev, "LIVE_RULES_DIRS", (target,))
+    monkeypatch.setattr(udev_installer, "LIVE_RULES_DIRS", (target,))
     result = install(plan_install("uaccess", target), yes=True, reload=True)
     assert result.ok
     assert [run.args[1:] for run in result.commands] == [cmd[1:] for cmd in udev.RELOAD_COMMANDS]
@@ -232,7 +234,7 @@ def test_reload_failure_is_reported(
 ) -> None:
     script = fake_udevadm.parent / "bin" / "udevadm"
     script.write_text("#!/bin/sh\necho 'Failed to send reload request' >&2\nexit 1\n")
-    monkeypatch.setattr(udev, "LIVE_RULES_DIRS", (target,))
+    monkeypatch.setattr(udev_installer, "LIVE_RULES_DIRS", (target,))
     result = install(plan_install("uaccess", target), yes=True, reload=True)
     assert not result.ok
     assert len(result.commands) == 1

@@ -1,4 +1,4 @@
-"""spotlab.console.udev_rules: the strict udev rules parser, one test per error class."""
+"""spotlab.console.udev.rules: the strict udev rules parser, one test per error class."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from spotlab.console.udev_rules import (
+from spotlab.console.udev import (
     KEYS,
     Code,
     UdevRulesError,

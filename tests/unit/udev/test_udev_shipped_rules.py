@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from spotlab.console import udev
-from spotlab.console.udev_rules import RulesFile, is_world_writable, parse_file
+from spotlab.console.udev import RulesFile, is_world_writable, parse_file
 
 ROOT = Path(__file__).resolve().parents[3]
 UDEV_DIR = ROOT / "udev"
