@@ -162,7 +162,13 @@ class PtyServer:
                 if self._master is not None:
                     self._close_pty()
                 back = self.device.link_return_ns(now)
-                wait = MAX_WAIT_S if back is None else max(MIN_WAIT_S, (back - now) / 1e9)
+                # Wake at least every MAX_WAIT_S: the device keeps running (and is kept
+                # caught up) while its port is away, ready to answer the moment it returns.
+                wait = (
+                    MAX_WAIT_S
+                    if back is None
+                    else max(MIN_WAIT_S, min(MAX_WAIT_S, (back - now) / 1e9))
+                )
                 select.select([self._wake_r], [], [], wait)
                 continue
             if self._master is None:
