@@ -43,6 +43,9 @@ VER_WINDOW = 1.0
 BREAK_WAIT = 0.15
 #: Quiet time after the banner before the first command (a second banner may follow).
 _SETTLE = 0.02
+#: Pause after ``RESET:`` at a streaming rate before the host moves to 9600 baud, so
+#: that the command has reached the device at the rate it was sent at.
+_STREAM_RESET_PAUSE = 0.05
 
 
 def find_reply(line: bytes) -> bytes | None:
@@ -81,17 +84,22 @@ class CommandChannel:
         self.break_works: bool | None = None
 
     # -- reset -------------------------------------------------------------------
-    def reset(self, timeout: float | None = None) -> None:
+    def reset(self, timeout: float | None = None, *, streaming_baud: int | None = None) -> None:
         """Bring the device to its reset state at 9600 baud and wait for the banner.
 
         Sends a BREAK (unless BREAK is known not to reach the device on this
         link) and waits up to a quarter of ``timeout`` (at most 0.15 s); then, without a banner,
-        sends ``\\r`` + ``RESET:`` at 9600 baud and waits for the rest.
+        sends ``\\r`` + ``RESET:`` at ``streaming_baud`` (if given), then at 9600 baud,
+        and waits for the rest.
 
         Parameters
         ----------
         timeout : float, optional
             Total time allowed; ``reply_timeout`` by default.
+        streaming_baud : int, optional
+            A rate the device may still be running at (it kept streaming while the
+            port was away): where no BREAK reaches it (pseudo-terminals, TCP), only a
+            ``RESET:`` at that rate does.
 
         Raises
         ------
@@ -109,6 +117,12 @@ class CommandChannel:
             if self._await_banner(time.monotonic() + min(total / 4, BREAK_WAIT)):
                 self.break_works = True
                 return
+        if streaming_baud is not None and streaming_baud != RESET_BAUD:
+            self.link.set_baud(streaming_baud)
+            self.link.write(b"\r" + encode_command("RESET"))
+            time.sleep(_STREAM_RESET_PAUSE)
+            self.link.set_baud(RESET_BAUD)
+            sent.append(f"RESET: at {streaming_baud} baud")
         # An empty line ends any half-received command; the device ignores it.
         self.link.write(b"\r" + encode_command("RESET"))
         sent.append("RESET: at 9600 baud")

@@ -200,10 +200,10 @@ class SelspotDriver(Driver):
             self._link.close()
             raise
 
-    def _bring_up(self, reset_wait: float) -> None:
+    def _bring_up(self, reset_wait: float, streaming_baud: int | None = None) -> None:
         """Reset, negotiate, configure and start; one more try if it fails after the reset."""
         for attempt in (1, 2):
-            self._channel.reset(reset_wait)
+            self._channel.reset(reset_wait, streaming_baud=streaming_baud)
             try:
                 self._configure_and_start()
                 return
@@ -390,7 +390,9 @@ class SelspotDriver(Driver):
             if not self._link.is_open:
                 self._link.open()
                 self._tap_event("open", port=self.port)
-            self._bring_up(min(self.reply_timeout, RECOVERY_RESET_WAIT))
+            # After a lost port the device may still stream at our rate, deaf to RESET:
+            # at 9600 (no BREAK crosses a pseudo-terminal or TCP).
+            self._bring_up(min(self.reply_timeout, RECOVERY_RESET_WAIT), self.config.baud)
         except DeviceConfigurationError:
             raise
         except DeviceDisconnected:
