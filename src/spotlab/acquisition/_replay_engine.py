@@ -26,6 +26,14 @@ DecoderFactory = Callable[[dict[str, Any]], StreamDecoder]
 BREAK_EVENTS = frozenset({"disconnected", "reconnected", "device_reset"})
 """Link events after which sequence numbers must not be joined."""
 
+RECOVERY_START = frozenset({"disconnected", "device_reset"})
+RECOVERY_END = frozenset({"reconnected", "started"})
+"""RX bytes between a link event of ``RECOVERY_START`` and the next of ``RECOVERY_END``
+are the driver's recovery dialogue (reset, commands), not stream bytes: the live
+driver did not decode them, and neither does replay. Frames of a stream still
+running on the device may be among them; decoded after the break they would be
+compared with a restarted stream and counted as lost."""
+
 
 def add_stats(a: LinkStats, b: LinkStats) -> LinkStats:
     """Field-wise sum of two sets of link counters."""
@@ -53,7 +61,8 @@ class StreamState:
     rx_bytes, tx_bytes : int
         Wire bytes recorded each way.
     undecoded_bytes : int
-        RX bytes recorded before the stream's metadata (start-up dialogue).
+        RX bytes recorded before the stream's metadata (start-up dialogue) or
+        while the driver was recovering (recovery dialogue).
     decode_errors : int
         ``ProtocolError`` raised by the decoder (each followed by a discontinuity).
     disconnections, reconnects, device_resets : int
@@ -62,6 +71,9 @@ class StreamState:
         The driver's own counters at the end of the recording (``link_stats`` event).
     undecodable : str
         Why no decoder could be built for the metadata in force (empty if one was).
+    recovering : bool
+        Between a ``disconnected`` / ``device_reset`` event and the next
+        ``reconnected`` / ``started``: RX bytes are the recovery dialogue.
     """
 
     index: int
@@ -78,6 +90,7 @@ class StreamState:
     device_resets: int = 0
     live_stats: dict[str, Any] | None = None
     undecodable: str = ""
+    recovering: bool = False
 
     def decoder_stats(self) -> LinkStats:
         """Counters of every decoder this stream used."""
@@ -160,6 +173,9 @@ class Walk:
     def _feed(self, state: StreamState, rec: Record) -> FrameBlock | None:
         n = len(rec.payload)
         state.rx_bytes += n
+        if state.recovering:
+            state.undecoded_bytes += n
+            return None
         if state.decoder is None:
             if not state.metadata or state.undecodable:
                 state.undecoded_bytes += n
@@ -191,6 +207,10 @@ class Walk:
         detail = info.get("detail")
         if kind == "link_stats" and isinstance(detail, dict):
             state.live_stats = detail
+        if kind in RECOVERY_START:
+            state.recovering = True
+        elif kind in RECOVERY_END:
+            state.recovering = False
         if kind not in BREAK_EVENTS:
             return False
         if kind == "disconnected":

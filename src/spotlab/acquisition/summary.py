@@ -54,8 +54,10 @@ class StreamSummary:
     duplicates, bytes_skipped : int
         Decoder counts.
     undecoded_bytes : int
-        RX bytes not decoded: the start-up dialogue before the metadata, or a
-        stream no decoder could be built for (see ``undecodable``).
+        RX bytes not decoded: the start-up dialogue before the metadata, the
+        recovery dialogue after a disconnection or device reset (until
+        ``reconnected`` or ``started``), or a stream no decoder could be built
+        for (see ``undecodable``).
     decode_errors : int
         Protocol errors the decoder raised.
     duration_source : str
