@@ -213,7 +213,12 @@ class CommandChannel:
                         )
                     if len(reply) < len(line):
                         log.debug("skipped %r before the reply to %s", line[: -len(reply)], command)
-                    return parse_reply(reply, data_prefix)
+                    try:
+                        return parse_reply(reply, data_prefix)
+                    except ProtocolError as exc:
+                        raise ProtocolError(
+                            f"{exc} (the answer to {command} from {self.link.url})"
+                        ) from exc
             if line:
                 damaged.append(line)
                 self.stats.crc_errors += 1
