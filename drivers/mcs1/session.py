@@ -46,6 +46,10 @@ _SETTLE = 0.02
 #: Pause after ``RESET:`` at a streaming rate before the host moves to 9600 baud, so
 #: that the command has reached the device at the rate it was sent at.
 _STREAM_RESET_PAUSE = 0.05
+#: Wait for the banner after each ``RESET:`` at a streaming rate, before sending it again
+#: (a pseudo-terminal's far side reads late on a loaded machine, and takes the bytes at
+#: the rate set by then).
+_STREAM_RESET_WAIT = 0.15
 
 
 def find_reply(line: bytes) -> bytes | None:
@@ -90,7 +94,8 @@ class CommandChannel:
         Sends a BREAK (unless BREAK is known not to reach the device on this
         link) and waits up to a quarter of ``timeout`` (at most 0.15 s); then, without a banner,
         sends ``\\r`` + ``RESET:`` at ``streaming_baud`` (if given), then at 9600 baud,
-        and waits for the rest.
+        and waits for the rest (with ``streaming_baud``, both are sent again every
+        0.2 s until the banner comes).
 
         Parameters
         ----------
@@ -118,15 +123,23 @@ class CommandChannel:
                 self.break_works = True
                 return
         if streaming_baud is not None and streaming_baud != RESET_BAUD:
-            self.link.set_baud(streaming_baud)
+            sent += [f"RESET: at {streaming_baud} baud", "RESET: at 9600 baud"]
+            while True:
+                self.link.set_baud(streaming_baud)
+                self.link.write(b"\r" + encode_command("RESET"))
+                time.sleep(_STREAM_RESET_PAUSE)
+                self.link.set_baud(RESET_BAUD)
+                self.link.write(b"\r" + encode_command("RESET"))
+                wait_until = min(deadline, time.monotonic() + _STREAM_RESET_WAIT)
+                found = self._await_banner(wait_until)
+                if found or time.monotonic() >= deadline:
+                    break
+        else:
+            # An empty line ends any half-received command; the device ignores it.
             self.link.write(b"\r" + encode_command("RESET"))
-            time.sleep(_STREAM_RESET_PAUSE)
-            self.link.set_baud(RESET_BAUD)
-            sent.append(f"RESET: at {streaming_baud} baud")
-        # An empty line ends any half-received command; the device ignores it.
-        self.link.write(b"\r" + encode_command("RESET"))
-        sent.append("RESET: at 9600 baud")
-        if self._await_banner(deadline):
+            sent.append("RESET: at 9600 baud")
+            found = self._await_banner(deadline)
+        if found:
             if sent[0] == "a BREAK" and self.break_works is None:
                 self.break_works = False  # the device is there; BREAK does not reach it
             return
