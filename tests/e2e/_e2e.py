@@ -1,0 +1,325 @@
+"""End-to-end helpers: the real ``spotlab`` command line on real pseudo-terminals.
+
+(A module of its own, not ``conftest.py``: with several ``conftest.py`` in folders
+that are not packages, ``from conftest import ...`` finds whichever was loaded last.)
+
+Every test here runs the simulator (``spotlab sim selspot --pty``) and the
+recorder (``spotlab record``) as separate processes, as a lab runs them, and
+reads what they leave: the journal (decoded again with ``spotlab info`` and
+:func:`spotlab.acquisition.replay.replay`), the simulator's ground truth CSV
+and fault log. Every process started here is stopped and waited for in a
+``finally``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from spotlab.acquisition.replay import replay
+from spotlab.console.decoding import decoder_for
+from spotlab.io.journal import JournalReader, RecordType
+
+CLI: tuple[str, ...] = (sys.executable, "-m", "spotlab.console.cli")
+#: The system of the issue: 4 cameras x 32 LEDs at 200 Hz.
+CAMERAS, LEDS, RATE_HZ = 4, 32, 200.0
+
+I64 = npt.NDArray[np.int64]
+
+
+def run_cli(*args: object, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
+    """Run ``spotlab ARGS...`` to its end (killed and waited for after ``timeout`` s)."""
+    return subprocess.run(
+        [*CLI, *(str(a) for a in args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        stdin=subprocess.DEVNULL,
+        check=False,
+    )
+
+
+def spawn_cli(args: Sequence[object], stdout: Path, stderr: Path) -> subprocess.Popen[bytes]:
+    """Start ``spotlab ARGS...`` with its output going to files (no pipe to fill up)."""
+    with open(stdout, "wb") as out, open(stderr, "wb") as err:
+        return subprocess.Popen(
+            [*CLI, *(str(a) for a in args)], stdout=out, stderr=err, stdin=subprocess.DEVNULL
+        )
+
+
+def stop_process(
+    proc: subprocess.Popen[bytes], sig: int = signal.SIGTERM, wait: float = 15.0
+) -> int:
+    """Send ``sig`` (if still running) and wait; SIGKILL if it does not end. Returns the code."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(timeout=wait)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return int(proc.returncode)
+
+
+def error_lines(stderr: str) -> list[str]:
+    """Lines of ``stderr`` that are spotlab's one-line error reports."""
+    return [line for line in stderr.splitlines() if line.startswith("spotlab: error:")]
+
+
+def assert_one_clear_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
+    """Non-zero exit, exactly one ``spotlab: error:`` line (naming ``needles``), no traceback."""
+    assert result.returncode != 0, result
+    assert "Traceback" not in result.stderr, result.stderr
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1, result.stderr
+    for needle in needles:
+        assert needle.lower() in lines[0].lower(), (needle, lines[0])
+    return lines[0]
+
+
+# -- the simulator -------------------------------------------------------------------
+
+
+@dataclass
+class Truth:
+    """The simulator's ground truth, one entry per frame taken (first columns only)."""
+
+    stream: I64
+    seq: I64
+    frame_no: I64
+    sent: npt.NDArray[np.bool_]
+    true_time_ns: I64
+    device_tick: I64
+
+    def __len__(self) -> int:
+        return int(self.seq.shape[0])
+
+
+def read_truth(path: Path) -> Truth:
+    """Read ``stream, seq, frame_no, sent, true_time_s, device_tick`` of a truth CSV."""
+    cols: list[list[float]] = [[] for _ in range(6)]
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        assert header[:6] == ["stream", "seq", "frame_no", "sent", "true_time_s", "device_tick"]
+        for row in reader:
+            if len(row) < 6:  # a row cut by a killed simulator
+                continue
+            for i in range(6):
+                cols[i].append(float(row[i]))
+    stream, seq, frame_no, sent, t_s, tick = (np.asarray(c) for c in cols)
+    return Truth(
+        stream=stream.astype(np.int64),
+        seq=seq.astype(np.int64),
+        frame_no=frame_no.astype(np.int64),
+        sent=sent.astype(bool),
+        true_time_ns=np.round(t_s * 1e9).astype(np.int64),
+        device_tick=tick.astype(np.int64),
+    )
+
+
+@dataclass
+class Sim:
+    """A running ``spotlab sim selspot --pty`` process."""
+
+    proc: subprocess.Popen[bytes]
+    path: str
+    folder: Path
+    truth_path: Path
+    fault_log_path: Path
+    stderr_path: Path
+
+    def stop(self) -> int:
+        """SIGTERM and wait: the simulator writes its truth and fault log, then exits."""
+        return stop_process(self.proc)
+
+    def kill(self) -> None:
+        """SIGKILL and wait: the device vanishes for good."""
+        stop_process(self.proc, signal.SIGKILL)
+
+    def truth(self) -> Truth:
+        """Ground truth (complete once stopped)."""
+        return read_truth(self.truth_path)
+
+    def fault_log(self) -> dict[str, Any]:
+        """The fault log (complete once stopped)."""
+        data: dict[str, Any] = json.loads(self.fault_log_path.read_text())
+        return data
+
+
+def _first_line(path: Path, proc: subprocess.Popen[bytes], err: Path, timeout: float) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        text = path.read_bytes()
+        if b"\n" in text:
+            return text.split(b"\n", 1)[0].decode()
+        if proc.poll() is not None:
+            break
+        time.sleep(0.02)
+    raise AssertionError(
+        f"spotlab sim printed no device path (exit {proc.poll()}): {err.read_text()[-2000:]}"
+    )
+
+
+@contextmanager
+def sim_pty(
+    folder: Path,
+    *,
+    cameras: int = CAMERAS,
+    leds: int = LEDS,
+    rate: float = RATE_HZ,
+    seed: int = 0,
+    faults: str = "",
+    name: str = "sim",
+) -> Iterator[Sim]:
+    """``spotlab sim selspot --pty`` with truth and fault log; yields once its path is printed.
+
+    Stopped (SIGTERM, wait) on exit, so that the truth and fault log are complete.
+    """
+    truth = folder / f"{name}-truth.csv"
+    fault_log = folder / f"{name}-faults.json"
+    out, err = folder / f"{name}.stdout", folder / f"{name}.stderr"
+    args: list[object] = [
+        "sim",
+        "selspot",
+        "--pty",
+        "--cameras",
+        cameras,
+        "--leds",
+        leds,
+        "--rate",
+        rate,
+        "--seed",
+        seed,
+        "--truth",
+        truth,
+        "--fault-log",
+        fault_log,
+    ]
+    if faults:
+        args += ["--faults", faults]
+    proc = spawn_cli(args, out, err)
+    try:
+        path = _first_line(out, proc, err, timeout=30.0)
+        yield Sim(proc, path, folder, truth, fault_log, err)
+    finally:
+        stop_process(proc)
+
+
+def record_args(
+    port: str,
+    out: Path,
+    seconds: float,
+    *,
+    cameras: int = CAMERAS,
+    leds: int = LEDS,
+    rate: float = RATE_HZ,
+) -> list[object]:
+    """Arguments of ``spotlab record PORT --driver selspot ...``."""
+    return [
+        "record",
+        port,
+        "--driver",
+        "selspot",
+        "--cameras",
+        cameras,
+        "--leds",
+        leds,
+        "--rate",
+        rate,
+        "--seconds",
+        seconds,
+        "--out",
+        out,
+    ]
+
+
+# -- what a journal holds ------------------------------------------------------------
+
+
+@dataclass
+class Decoded:
+    """Every frame decoded again from a journal (one stream), in order."""
+
+    seq: I64
+    ticks: I64
+    arrival_ns: I64
+
+    def __len__(self) -> int:
+        return int(self.seq.shape[0])
+
+
+def decode(path: Path) -> Decoded:
+    """Decode a journal's (single) stream with the driver table, as ``spotlab info`` does."""
+    seqs, ticks, arrivals = [], [], []
+    for _name, block in replay(path, decoder_for):
+        seqs.append(block.seq)
+        ticks.append(block.ticks)
+        arrivals.append(block.arrival_ns)
+    if not seqs:
+        empty = np.zeros(0, np.int64)
+        return Decoded(empty, empty.copy(), empty.copy())
+    return Decoded(
+        np.concatenate(seqs).astype(np.int64),
+        np.concatenate(ticks).astype(np.int64),
+        np.concatenate(arrivals).astype(np.int64),
+    )
+
+
+@dataclass
+class Event:
+    """A link event recorded in a journal."""
+
+    t_ns: int
+    kind: str
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+def events(path: Path) -> list[Event]:
+    """The EVENT records of a journal, in order."""
+    found = []
+    for rec in JournalReader(path):
+        if rec.type == RecordType.EVENT:
+            info = json.loads(rec.payload)
+            found.append(Event(rec.t_ns, info.get("kind", ""), info.get("detail") or {}))
+    return found
+
+
+def info(path: Path) -> dict[str, Any]:
+    """``spotlab info PATH --json`` (it must succeed)."""
+    result = run_cli("info", path, "--json")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    data: dict[str, Any] = json.loads(result.stdout)
+    return data
+
+
+def match_to_truth(dec: Decoded, truth: Truth) -> npt.NDArray[np.intp]:
+    """Index of each decoded frame's truth row, found by its device tick (u32).
+
+    Asserts that every decoded frame is a frame the device sent, with the same seq.
+    """
+    sent = np.flatnonzero(truth.sent)
+    ticks = truth.device_tick[sent]
+    assert np.unique(ticks).size == ticks.size, "device ticks of sent frames must be unique"
+    order = np.argsort(ticks)
+    keys = dec.ticks % (1 << 32)
+    pos = np.searchsorted(ticks[order], keys)
+    pos = np.minimum(pos, ticks.size - 1)
+    found = ticks[order][pos] == keys
+    assert found.all(), f"{int((~found).sum())} decoded frames match no frame the device sent"
+    rows = sent[order][pos]
+    assert np.array_equal(truth.seq[rows], dec.seq % 65536), "decoded seq differs from the truth"
+    return rows
