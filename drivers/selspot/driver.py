@@ -36,6 +36,7 @@ from spotlab.core.streams import StreamSpec
 from spotlab.core.wire import LinkEventKind
 from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.mcs1.commands import (
+    RESET_BAUD,
     DeviceConfigurationError,
     Reply,
     encode_command,
@@ -203,7 +204,7 @@ class SelspotDriver(Driver):
     def _bring_up(self, reset_wait: float, streaming_baud: int | None = None) -> None:
         """Reset, negotiate, configure and start; one more try if it fails after the reset."""
         for attempt in (1, 2):
-            self._channel.reset(reset_wait, streaming_baud=streaming_baud)
+            self._reset(reset_wait, streaming_baud)
             try:
                 self._configure_and_start()
                 return
@@ -211,6 +212,21 @@ class SelspotDriver(Driver):
                 if attempt == 2:
                     raise
                 log.info("%s: %s; resetting and trying once more", self.port, exc)
+
+    def _reset(self, wait: float, streaming_baud: int | None) -> None:
+        try:
+            self._channel.reset(wait, streaming_baud=streaming_baud)
+        except DeviceTimeout as exc:
+            if streaming_baud is not None or self.config.baud == RESET_BAUD:
+                raise
+            # No banner at 9600: the device may still stream at our rate (a recording
+            # killed before its STOP:), deaf to RESET: at 9600 where no BREAK reaches it
+            # (pseudo-terminals, TCP).
+            log.info("%s: no reset banner at 9600 baud; trying at %d", self.port, self.config.baud)
+            try:
+                self._channel.reset(min(wait, RECOVERY_RESET_WAIT), streaming_baud=self.config.baud)
+            except DeviceTimeout:
+                raise exc from None
 
     def _configure_and_start(self) -> None:
         c = self.config
