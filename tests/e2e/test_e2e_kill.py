@@ -16,6 +16,7 @@ from _e2e import (
     info,
     match_to_truth,
     record_args,
+    run_cli,
     sim_pty,
     spawn_cli,
     stop_process,
@@ -51,8 +52,12 @@ def test_killed_recording_holds_all_but_the_last_100_ms(tmp_path: Path, seed: in
             proc.wait(timeout=10)
         finally:
             stop_process(proc, signal.SIGKILL)
+        # The device was left streaming (no STOP:): the next recording still gets it.
+        again = run_cli(*record_args(sim.path, tmp_path / "again.spj", 0.5), timeout=60)
+        assert again.returncode == 0, again.stderr
         assert sim.stop() == 0
     assert proc.returncode == -signal.SIGKILL
+    assert info(tmp_path / "again.spj")["streams"][0]["frames"] > 50
 
     summary = info(journal)
     assert not summary["complete"]
@@ -64,7 +69,7 @@ def test_killed_recording_holds_all_but_the_last_100_ms(tmp_path: Path, seed: in
     assert len(dec) == s["frames"] > 0
     rows = match_to_truth(dec, truth)
     assert np.array_equal(dec.seq % 65536, np.arange(len(dec))), "contiguous from seq 0"
-    assert set(truth.stream[rows].tolist()) == {0}
+    assert set(truth.stream[rows].tolist()) == {0}  # (the second recording is stream 1)
 
     # The journal reaches to within 100 ms of the kill...
     last_arrival_ns = int(dec.arrival_ns[-1])
