@@ -13,8 +13,11 @@ away while in use is :class:`DeviceDisconnected`.
 
 from __future__ import annotations
 
+import array
 import errno
+import fcntl
 import os
+import termios
 import time
 from collections.abc import Callable
 
@@ -200,11 +203,11 @@ class SerialLink:
         ser = self._port()
         wait = MAX_POLL if timeout is None else round(max(0.0, min(timeout, MAX_POLL * 10)), 3)
         try:
-            waiting = ser.in_waiting
+            waiting = _bytes_waiting(ser)
             if not waiting:
                 self._set_timeout(ser, wait)
                 data = ser.read(1)
-                waiting = ser.in_waiting if data else 0
+                waiting = _bytes_waiting(ser) if data else 0
                 if waiting:
                     data += ser.read(waiting)
             else:
@@ -309,3 +312,21 @@ class SerialLink:
             raise ConfigurationError(f"{self.url} does not support {baud} baud: {exc}") from exc
         except (serial.SerialException, OSError) as exc:
             raise self._lost("a baud-rate change", exc) from exc
+
+
+def _bytes_waiting(ser: serial.SerialBase) -> int:
+    """Bytes ready to read without blocking.
+
+    pyserial's ``socket://`` answers ``in_waiting`` with 0 or 1 (it only asks
+    ``select``), which would make every read of a TCP link return one byte; ask
+    the socket itself how much it holds.
+    """
+    sock = getattr(ser, "_socket", None)
+    if sock is not None:
+        count = array.array("i", [0])
+        try:
+            fcntl.ioctl(sock.fileno(), termios.FIONREAD, count)
+        except OSError:
+            return int(ser.in_waiting)
+        return max(int(count[0]), int(ser.in_waiting))
+    return int(ser.in_waiting)

@@ -183,8 +183,11 @@ def sim_pty(
     seed: int = 0,
     faults: str = "",
     name: str = "sim",
+    transport: str = "pty",
 ) -> Iterator[Sim]:
-    """``spotlab sim selspot --pty`` with truth and fault log; yields once its path is printed.
+    """``spotlab sim selspot --pty`` (or ``--tcp``) with truth and fault log.
+
+    Yields once the device path (or ``socket://`` URL) is printed.
 
     Stopped (SIGTERM, wait) on exit, so that the truth and fault log are complete.
     """
@@ -194,7 +197,7 @@ def sim_pty(
     args: list[object] = [
         "sim",
         "selspot",
-        "--pty",
+        f"--{transport}",
         "--cameras",
         cameras,
         "--leds",
