@@ -92,6 +92,7 @@ def test_record_on_a_missing_port_names_it(tmp_path: Path) -> None:
     port = tmp_path / "no-such-tty"
     result = run_cli(*record_args(str(port), tmp_path / "a.spj", 1.0))
     assert_one_clear_error(result, str(port), "no device")
+    assert not (tmp_path / "a.spj").exists(), "a failed start leaves no file to block a retry"
 
 
 def test_record_on_a_silent_pty_says_the_device_never_answered(tmp_path: Path) -> None:
@@ -209,9 +210,14 @@ def test_device_gone_for_good_keeps_what_was_recorded(tmp_path: Path) -> None:
     stderr = (tmp_path / "rec.err").read_text()
     print(f"exit {code}; stderr: {stderr.strip()}")
     assert "Traceback" not in stderr
-    assert sim.path in stderr and "went away" in stderr  # the loss is reported
-    assert len([ln for ln in stderr.splitlines() if ln.startswith("spotlab: error:")]) <= 1
-    live = json.loads((tmp_path / "rec.out").read_text())["streams"][0] if code == 0 else None
+    assert sim.path in stderr and "went away" in stderr  # the loss is reported as it happens
+    errors = [ln for ln in stderr.splitlines() if ln.startswith("spotlab: error:")]
+    # ... and again at the end, as the reason for a non-zero exit.
+    assert code == 1 and len(errors) == 1, stderr
+    assert "device gone when the recording ended" in errors[0] and str(journal) in errors[0]
+    report = json.loads((tmp_path / "rec.out").read_text())
+    assert list(report["away_at_end"]) == ["selspot"]
+    live = report["streams"][0]
 
     summary = info(journal)
     assert summary["complete"]  # closed cleanly by the recorder
@@ -220,5 +226,4 @@ def test_device_gone_for_good_keeps_what_was_recorded(tmp_path: Path) -> None:
     assert s["disconnections"] == 1 and s["reconnects"] == 0
     dec = decode(journal)
     assert np.array_equal(dec.seq, np.arange(len(dec)) + dec.seq[0]), "contiguous"
-    if live is not None:
-        assert s["frames"] == live["frames"]
+    assert s["frames"] == live["frames"]

@@ -13,6 +13,7 @@ from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.console.errors import CommandError
 from spotlab.console.progress import Progress
+from spotlab.core.wire import LinkEventKind
 from spotlab.drivers import Driver, available_families, load_driver
 
 # Command-line flag -> driver keyword argument.
@@ -102,6 +103,27 @@ def build_drivers(args: argparse.Namespace) -> list[Driver]:
     return drivers
 
 
+class OutageWatch:
+    """A wire tap that remembers which streams are away (lost, not yet reconnected)."""
+
+    def __init__(self) -> None:
+        self.away: dict[str, str] = {}
+
+    def on_rx(self, stream: str, data: bytes, arrival_ns: int) -> None:
+        """Bytes are not its business."""
+
+    def on_tx(self, stream: str, data: bytes, sent_ns: int) -> None:
+        """Bytes are not its business."""
+
+    def on_event(
+        self, stream: str, kind: LinkEventKind, detail: dict[str, object], t_ns: int
+    ) -> None:
+        if kind in ("disconnected", "device_reset"):
+            self.away[stream] = str(detail.get("reason", kind))
+        elif kind in ("reconnected", "started"):
+            self.away.pop(stream, None)
+
+
 def run(args: argparse.Namespace) -> int:
     if not args.seconds > 0:
         raise CommandError(f"--seconds must be positive, got {args.seconds}")
@@ -114,9 +136,17 @@ def run(args: argparse.Namespace) -> int:
     def show(status: SessionStatus) -> None:
         progress.update(status.elapsed_s, f"{sum(status.frames.values())} frames")
 
+    watch = OutageWatch()
+    for driver in drivers:
+        driver.add_tap(watch)
     session = Session(drivers, [recorder], close_devices=True)
     try:
         status = session.run_for(args.seconds, progress=show)
+    except BaseException:
+        if not any(session.frames.values()):
+            # Nothing but a failed start-up dialogue: leave no file that blocks a retry.
+            args.out.unlink(missing_ok=True)
+        raise
     finally:
         progress.close()
     result: dict[str, Any] = {
@@ -129,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
         "overflows": status.overflows,
         "errors": [str(e) for e in session.errors],
     }
+    result["away_at_end"] = dict(watch.away)
     if args.json:
         print(json.dumps(result))
     else:
@@ -138,4 +169,9 @@ def run(args: argparse.Namespace) -> int:
                 f"CRC errors {s['crc_errors']}, resyncs {s['resyncs']}, "
                 f"reconnects {s['reconnects']} -> {args.out}"
             )
+    if watch.away:
+        lost = ", ".join(f"{name} ({why})" for name, why in watch.away.items())
+        raise CommandError(
+            f"device gone when the recording ended: {lost}; what arrived before is in {args.out}"
+        )
     return 0
