@@ -2,6 +2,8 @@
 
 Usage: ``python benchmarks/run_all.py [NAME ...]`` (names without ``.py``).
 Figures are measurements on a shared, noisy machine: compare ratios within one run.
+The fuzzers (``fuzz_*.py``, about 20 minutes each) run only when named, or by
+``make fuzz``.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ def main(argv: list[str]) -> int:
     if argv:
         wanted = set(argv)
         scripts = [p for p in scripts if p.stem in wanted]
+    else:
+        scripts = [p for p in scripts if not p.stem.startswith("fuzz_")]
     failed = 0
     for script in scripts:
         print(f"# {script.name}", file=sys.stderr, flush=True)
