@@ -34,6 +34,10 @@ from spotlab.simulators.service import POWER_UP_LEAD_NS, build_device, options_f
 
 MIN_WAIT_NS = 1_000_000
 MAX_WAIT_NS = 50_000_000
+#: Bytes reach the host in batches on these boundaries, as a USB-serial adapter
+#: hands them over once per 1 ms USB frame (FTDI latency timer set to 1 ms by our
+#: udev rules). Without it every read would return the few bytes sent since the last.
+USB_FRAME_NS = 1_000_000
 
 
 class Serial(SerialBase):
@@ -139,7 +143,7 @@ class Serial(SerialBase):
     def _pull(self) -> None:
         now = time.monotonic_ns()
         device = self._check_link(now)
-        for seg in device.output_segments(now):
+        for seg in device.output_segments(now - now % USB_FRAME_NS):
             rx_baud = self._baud_at(seg.end_ns)
             self._rx += (
                 seg.data if rx_baud == seg.baud else garble(seg.data, seg.baud, rx_baud, self._rng)
