@@ -37,7 +37,8 @@ class StreamSummary:
     crc_errors, resyncs : int
         Checksum failures and resynchronisations (decoder counts).
     gaps : int
-        Runs of lost frames (decoder count) plus disconnections (recorded events).
+        Runs of lost frames (decoder count) plus outages (recorded disconnections
+        and device resets), as the live driver counts them.
     duration_s : float
         First to last frame, in s: from device ticks when the stream never broke
         and its tick rate is known, otherwise from host arrival stamps.
@@ -217,7 +218,7 @@ def _stream_summary(state: StreamState, timing: FrameTiming | None) -> StreamSum
         lost_frames=stats.lost_frames,
         crc_errors=stats.crc_errors,
         resyncs=stats.resyncs,
-        gaps=stats.gaps + state.disconnections,
+        gaps=stats.gaps + state.disconnections + state.device_resets,
         duration_s=duration,
         rate_hz=rate,
         reconnects=state.reconnects,
