@@ -9,15 +9,28 @@ prefix (mcs1.md §4-5). From them :class:`SequenceTracker` derives, per frame:
 * device drops: ``frame_no`` advanced by ``f > s``: ``f - s`` frames the device
   dropped itself (FIFO overflow, status bit 0x40);
 * duplicates: ``seq`` did not advance (``s == 0``): the frame is dropped;
-* restarts: ``seq`` or ``frame_no`` went backwards: the device started a new
-  stream the host was not told about; handled like :meth:`mark_discontinuity`.
+* restarts: ``seq`` or ``frame_no`` went backwards, or ``frame_no`` advanced
+  by more than the device clock allows (below): the device started a new stream
+  the host was not told about, or the payload was damaged in a way its CRC-16
+  missed; handled like :meth:`mark_discontinuity`, nothing counted as lost.
+
+The plausibility limit: the device takes one frame per frame period and can
+drop only frames it took, so between two frames ``frame_no`` cannot advance by
+more than ``1 + (1 + TICK_TOLERANCE) * dt / period`` for a tick advance ``dt``
+(ticks going back allow no advance at all). Without a frame period the limit
+is :data:`MAX_FRAME_NO_STEP` frames. It keeps a damaged ``frame_no`` that
+still passes the CRC (about 1 damaged frame in 65536) from counting as
+billions of frames dropped by the device.
 
 Each frame that reveals a loss counts one gap. A new tracker makes no
 assumption about where in a stream it joins. After :meth:`mark_discontinuity`
 (called when ``START:`` has been acknowledged) or a detected restart, the first
 frame is compared with a stream counting from 0, so frames lost right after
 ``START:`` are counted too — unless its ``seq`` exceeds its ``frame_no``, which
-no stream counting from ``START:`` can show.
+no stream counting from ``START:`` can show, or its ``frame_no + 1`` exceeds
+the limit: :data:`MAX_FRAME_NO_STEP` after ``START:``, the ticks since the
+previous frame after a detected restart. Such a frame joins the new stream
+without counting anything before it.
 
 The unwrapped ``seq`` handed out stays strictly increasing across restarts: a
 new stream starts at the next multiple of 65536, so ``seq % 65536`` is always
@@ -34,6 +47,10 @@ import numpy.typing as npt
 from spotlab.core.stats import LinkStats
 
 SEQ_PERIOD = 1 << 16
+#: Largest ``frame_no`` advance accepted when the frame period is not known.
+MAX_FRAME_NO_STEP = 1 << 16
+#: Clock drift and jitter allowed, as a fraction of the tick advance (one frame is added).
+TICK_TOLERANCE = 0.05
 I64 = npt.NDArray[np.int64]
 
 
@@ -53,6 +70,11 @@ def _steps(raw: I64, previous: int, bits: int) -> I64:
     return out
 
 
+def _advance(ticks: I64, before: int | None) -> I64:
+    """Tick advance from the frame before each frame (0 for the very first frame)."""
+    return np.diff(ticks, prepend=ticks[:1] if before is None else before)
+
+
 class SequenceTracker:
     """Turns raw counters into unwrapped ones and counts losses into ``stats``.
 
@@ -61,15 +83,24 @@ class SequenceTracker:
     stats : LinkStats
         Counters to update: ``frames``, ``lost_frames``, ``device_dropped``,
         ``duplicates``, ``gaps``.
+    frame_period : float, optional
+        Device ticks per frame period, for the plausibility limit on ``frame_no``
+        advances. Without it the limit is :data:`MAX_FRAME_NO_STEP` frames.
 
     Attributes
     ----------
     restarts : int
-        Streams restarted without :meth:`mark_discontinuity` (counter went back).
+        Streams restarted without :meth:`mark_discontinuity` (a counter went
+        back, or ``frame_no`` advanced more than the ticks allow).
     """
 
-    def __init__(self, stats: LinkStats) -> None:
+    def __init__(self, stats: LinkStats, frame_period: float | None = None) -> None:
+        if frame_period is not None and not frame_period > 0:
+            raise ValueError(f"the frame period must be > 0 ticks, got {frame_period}")
         self.stats = stats
+        self.frame_period = frame_period
+        # frame_no advance allowed per tick of advance (the limit is 1 + this * dt)
+        self._per_tick = None if frame_period is None else (1 + TICK_TOLERANCE) / frame_period
         self.restarts = 0
         self._tick: int | None = None  # last unwrapped tick
         self._epoch = 0  # added to the unwrapped seq of the current stream
@@ -77,17 +108,22 @@ class SequenceTracker:
         self._frame_no: int | None = None  # last unwrapped frame_no
         self._last_out = -1  # last seq handed out
         self._from_start = False  # the next fresh frame belongs to a stream begun at START:
+        self._unannounced = False  # ... and that stream was detected, not announced
 
     def mark_discontinuity(self) -> None:
         """A new stream starts (``START:`` acknowledged, reconnect): do not join counters across.
 
         The next frame is compared with a stream counting from 0.
         """
+        self._new_stream(unannounced=False)
+
+    def _new_stream(self, unannounced: bool) -> None:
         if self._last_out >= self._epoch:
             self._epoch = (self._last_out // SEQ_PERIOD + 1) * SEQ_PERIOD
         self._seq = None
         self._frame_no = None
         self._from_start = True
+        self._unannounced = unannounced
 
     def update(
         self,
@@ -117,6 +153,7 @@ class SequenceTracker:
         """
         seq_raw = np.asarray(seq).astype(np.int64).reshape(-1)
         fn_raw = np.asarray(frame_no).astype(np.int64).reshape(-1)
+        tick_before = self._tick
         ticks_out = self._unwrap_ticks(np.asarray(ticks).astype(np.int64).reshape(-1))
         k = seq_raw.shape[0]
         if k and self._seq is not None and self._frame_no is not None:
@@ -131,6 +168,8 @@ class SequenceTracker:
                         and bool(((np.diff(fn_raw) & 0xFFFFFFFF) == 1).all())
                     )
                 )
+                # frame_no +1 is within the limit unless the ticks went back
+                and (self._per_tick is None or bool((_advance(ticks_out, tick_before) >= 0).all()))
             ):
                 seq_u = np.arange(self._seq + 1, self._seq + 1 + k, dtype=np.int64)
                 self._seq += k
@@ -141,10 +180,19 @@ class SequenceTracker:
                 return np.ones(k, dtype=bool), seq_u, ticks_out
         keep = np.ones(k, dtype=bool)
         seq_out = np.zeros(k, dtype=np.int64)
+        t_step = _advance(ticks_out, tick_before)
         start = 0
         while start < k:
-            start = self._segment(seq_raw[start:], fn_raw[start:], start, keep, seq_out)
+            start = self._segment(
+                seq_raw[start:], fn_raw[start:], t_step[start:], start, keep, seq_out
+            )
         return keep, seq_out, ticks_out
+
+    def _limit(self, t_step: I64) -> npt.NDArray[np.float64] | float:
+        """Largest ``frame_no`` advance the device clock allows over each tick advance."""
+        if self._per_tick is None:
+            return float(MAX_FRAME_NO_STEP)
+        return np.asarray(t_step * self._per_tick + 1.0, dtype=np.float64)
 
     def _unwrap_ticks(self, raw: I64) -> I64:
         if not raw.shape[0]:
@@ -161,7 +209,13 @@ class SequenceTracker:
         return out
 
     def _segment(
-        self, s_raw: I64, f_raw: I64, start: int, keep: npt.NDArray[np.bool_], seq_out: I64
+        self,
+        s_raw: I64,
+        f_raw: I64,
+        t_step: I64,
+        start: int,
+        keep: npt.NDArray[np.bool_],
+        seq_out: I64,
     ) -> int:
         """Process frames up to the next restart; return the index where it stopped."""
         if self._seq is None or self._frame_no is None:
@@ -170,20 +224,27 @@ class SequenceTracker:
             fresh, s_prev, f_prev = False, self._seq, self._frame_no
         s_step = _steps(s_raw, s_prev, 16)
         f_step = _steps(f_raw, f_prev, 32)
+        # A restart: a counter went back, or frame_no advanced more than the ticks allow.
+        back = (s_step < 0) | (f_step < 0) | (f_step > self._limit(t_step))
         if fresh:
-            if self._from_start and s_raw[0] <= f_raw[0]:
+            # Since START: at most MAX_FRAME_NO_STEP frames; since a detected restart, at
+            # most what the ticks since the previous frame allow.
+            first_limit = float(MAX_FRAME_NO_STEP)
+            if self._unannounced and self._per_tick is not None:
+                first_limit = int(t_step[0]) * self._per_tick + 1.0
+            if self._from_start and s_raw[0] <= f_raw[0] and f_raw[0] + 1 <= first_limit:
                 # A new stream counts both from 0: frames before the first one were lost.
                 s_step[0], f_step[0] = s_raw[0] + 1, f_raw[0] + 1
             else:
                 # Joined a running stream: nothing to compare the first frame with.
                 s_step[0], f_step[0] = 1, 1
             s_prev, f_prev = int(s_raw[0] - s_step[0]), int(f_raw[0] - f_step[0])
-        back = (s_step < 0) | (f_step < 0)
+            back[0] = False
         if back[0]:
-            # Only possible when not fresh: the device started a new stream unannounced.
+            # The device started a new stream unannounced, or the payload was damaged.
             self.restarts += 1
             self.stats.gaps += 1
-            self.mark_discontinuity()
+            self._new_stream(unannounced=True)
             return start
         stop = int(np.argmax(back)) if back.any() else s_raw.shape[0]
         s_step, f_step = s_step[:stop], f_step[:stop]

@@ -196,6 +196,11 @@ class SelspotDecoder:
         Slot period the frames must report; ``None`` accepts any.
     stats : LinkStats, optional
         Counters to update; a new one by default.
+    frame_period_us : float, optional
+        Frame period in µs (``1e9 / rate_mhz``; :meth:`from_config` passes it).
+        It bounds how far ``frame_no`` may advance for the ticks that passed
+        (see :class:`~spotlab.drivers.mcs1.sequence.SequenceTracker`); without
+        it the bound is a fixed 65536 frames.
 
     Attributes
     ----------
@@ -220,6 +225,7 @@ class SelspotDecoder:
         slot_us: int | None = 100,
         *,
         stats: LinkStats | None = None,
+        frame_period_us: float | None = None,
     ) -> None:
         n_leds = len(led_table(leds))
         if not (1 <= cameras <= 255 and 1 <= n_leds <= 255):
@@ -228,10 +234,11 @@ class SelspotDecoder:
         self.n_cams = cameras
         self.n_leds = n_leds
         self.slot_us = slot_us
+        self.frame_period_us = frame_period_us
         self.stats = stats if stats is not None else LinkStats()
         self.config_mismatches = 0
         self._frames = FrameDecoder(FRAME_TYPE, payload_len, self.stats)
-        self._tracker = SequenceTracker(self.stats)
+        self._tracker = SequenceTracker(self.stats, frame_period_us)
         self._dtype = frame_dtype(n_leds * cameras)
         # n_items | slot_us << 16 and n_leds | n_cams << 8, as the frames must carry them
         self._layout_a = (n_leds * cameras) | ((slot_us or 0) << 16)
@@ -244,7 +251,13 @@ class SelspotDecoder:
         """A decoder for a configuration (a :class:`SelspotConfig` or its ``to_dict()``)."""
         if not isinstance(config, SelspotConfig):
             config = SelspotConfig.from_dict(config)
-        return cls(config.cameras, config.leds, config.slot_us, stats=stats)
+        return cls(
+            config.cameras,
+            config.leds,
+            config.slot_us,
+            stats=stats,
+            frame_period_us=1e9 / config.rate_mhz,
+        )
 
     # -- StreamDecoder ---------------------------------------------------------------
     def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
