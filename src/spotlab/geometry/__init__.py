@@ -1,0 +1,1 @@
+"""Camera model and rigs: projection, distortion, DLT, calibration files are in spotlab.io."""

@@ -1,0 +1,1 @@
+"""Kinematics: orientation angles, smoothing splines, error estimates; numpy and scipy only."""

@@ -1,0 +1,1 @@
+"""Reconstruction: triangulation, rigid bodies, other sensors; numpy and scipy only."""
