@@ -1,1 +1,1 @@
-"""Camera model and rigs: projection, distortion, DLT, calibration files are in spotlab.io."""
+"""Camera model and rigs: projection, distortion, DLT parameters, rig calibration files."""
