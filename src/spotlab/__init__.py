@@ -1,5 +1,8 @@
 """spotlab: acquisition suite for optoelectronic motion measurement."""
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from spotlab.core import (
     ConfigurationError,
     DeviceError,
@@ -11,15 +14,33 @@ from spotlab.core import (
     StreamSpec,
 )
 
+if TYPE_CHECKING:
+    from spotlab.geometry import Camera, Rig
+
 __version__ = "0.1.0"
 
+# Numerics load scipy: imported on first use so that `import spotlab` stays light.
+_LAZY = {"Camera": "spotlab.geometry", "Rig": "spotlab.geometry"}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'spotlab' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
 __all__ = [
+    "Camera",
     "ConfigurationError",
     "DeviceError",
     "Frame",
     "FrameBlock",
     "ProtocolError",
     "RecordingError",
+    "Rig",
     "SpotlabError",
     "StreamSpec",
     "__version__",
