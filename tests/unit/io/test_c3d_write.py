@@ -1,0 +1,187 @@
+"""Trials we write read back identically in our reader, the c3d package and ezc3d."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from spotlab.core.errors import RecordingError
+from spotlab.io import Trial, read_c3d, write_c3d
+from spotlab.io.trial import FileFormatError
+
+EZC3D_DUMP = """
+import sys, numpy as np, ezc3d
+c = ezc3d.c3d(sys.argv[1])
+p = c["parameters"]
+np.savez(sys.argv[2], points=c["data"]["points"], analogs=c["data"]["analogs"],
+         first=c["header"]["points"]["first_frame"], last=c["header"]["points"]["last_frame"],
+         labels=np.array(p["POINT"]["LABELS"]["value"]),
+         analog_labels=np.array(
+             p["ANALOG"]["LABELS"]["value"] if c["data"]["analogs"].size else []),
+         rate=p["POINT"]["RATE"]["value"][0])
+"""
+
+
+def _f32(a: np.ndarray) -> np.ndarray:
+    return a.astype(np.float32).astype(np.float64)
+
+
+def _trial(frames: int = 60, markers: int = 4, channels: int = 3, per_frame: int = 5) -> Trial:
+    rng = np.random.default_rng(4)
+    points = _f32(rng.normal(0.0, 800.0, (frames, markers, 3)))
+    points[3, 1] = np.nan
+    points[10:20, 2] = np.nan
+    return Trial(
+        points=points,
+        labels=[f"M{i}" for i in range(markers)],
+        point_rate=100.0,
+        analog=_f32(rng.normal(0.0, 2.0, (frames * per_frame, channels))),
+        analog_labels=[f"EMG{i}" for i in range(channels)],
+        analog_rate=100.0 * per_frame,
+        first_frame=7,
+        events=[("Foot Strike", "Left", 0.25), ("Foot Off", "Right", 61.5)],
+    )
+
+
+def _read_with_c3d_package(path: Path) -> tuple[np.ndarray, np.ndarray, object]:
+    c3d = pytest.importorskip("c3d")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="No analog data found", category=UserWarning)
+        with open(path, "rb") as handle:
+            reader = c3d.Reader(handle)
+            frames = list(reader.read_frames())
+            labels = [s.strip() for s in reader.point_labels]
+    pts = np.array([p for _, p, _ in frames])
+    xyz = np.where(pts[:, :, 3:4] < 0, np.nan, pts[:, :, :3].astype(np.float64))
+    analog = np.concatenate([a.T for _, _, a in frames]) if frames[0][2].size else np.zeros(0)
+    return xyz, analog, (frames[0][0], labels)
+
+
+def test_round_trip_in_our_reader(tmp_path: Path) -> None:
+    trial = _trial()
+    path = tmp_path / "t.c3d"
+    write_c3d(path, trial)
+    back = read_c3d(path)
+    assert np.array_equal(back.points, trial.points, equal_nan=True)
+    assert np.array_equal(back.analog, trial.analog)
+    assert back.labels == trial.labels and back.analog_labels == trial.analog_labels
+    assert (back.point_rate, back.analog_rate, back.first_frame) == (100.0, 500.0, 7)
+    assert back.events == trial.events
+    assert back.metadata["notes"] == []
+
+
+def test_round_trip_in_the_c3d_package(tmp_path: Path) -> None:
+    trial = _trial()
+    path = tmp_path / "t.c3d"
+    write_c3d(path, trial)
+    xyz, analog, (first, labels) = _read_with_c3d_package(path)
+    assert np.array_equal(xyz, trial.points, equal_nan=True)
+    assert np.array_equal(analog, trial.analog)
+    assert first == 7 and labels == trial.labels
+
+
+def _ezc3d_dump(path: Path, out: Path) -> dict[str, np.ndarray]:
+    """Run ezc3d in a child process, so that a segfault fails the test instead of pytest."""
+    pytest.importorskip("ezc3d")
+    done = subprocess.run(
+        [sys.executable, "-c", EZC3D_DUMP, str(path), str(out)],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+    assert done.returncode == 0, f"ezc3d failed ({done.returncode}): {done.stderr[-800:]}"
+    with np.load(out) as data:
+        return {k: data[k] for k in data.files}
+
+
+@pytest.mark.parametrize("channels", [3, 0])
+def test_round_trip_in_ezc3d(tmp_path: Path, channels: int) -> None:
+    trial = _trial(channels=channels)
+    path = tmp_path / "t.c3d"
+    write_c3d(path, trial)
+    dump = _ezc3d_dump(path, tmp_path / "dump.npz")
+    points = dump["points"][:3].transpose(2, 1, 0)  # (4, M, F) -> (F, M, 3)
+    assert np.array_equal(points, trial.points, equal_nan=True)
+    assert int(dump["first"]) == trial.first_frame - 1  # ezc3d counts from 0
+    assert int(dump["last"]) == trial.first_frame - 1 + trial.n_frames - 1
+    assert list(dump["labels"]) == trial.labels
+    assert float(dump["rate"]) == 100.0
+    if channels:
+        assert np.array_equal(dump["analogs"][0].T, trial.analog)
+        assert list(dump["analog_labels"]) == trial.analog_labels
+
+
+def test_more_than_65535_frames(tmp_path: Path) -> None:
+    """POINT:FRAMES is capped; TRIAL:ACTUAL_START/END_FIELD carry the range; every frame is back."""
+    frames = 70_000
+    rng = np.random.default_rng(5)
+    points = _f32(rng.normal(0.0, 300.0, (frames, 2, 3)))
+    points[66_000:66_010, 1] = np.nan
+    trial = Trial(points=points, labels=["A", "B"], point_rate=200.0)
+    path = tmp_path / "long.c3d"
+    write_c3d(path, trial)
+    back = read_c3d(path)
+    assert back.n_frames == frames and back.first_frame == 1
+    assert np.array_equal(back.points, points, equal_nan=True)
+    xyz, _, (first, _) = _read_with_c3d_package(path)
+    assert first == 1 and xyz.shape == (frames, 2, 3)
+    assert np.array_equal(xyz, points, equal_nan=True)
+
+
+def test_points_not_in_mm_are_refused(tmp_path: Path) -> None:
+    trial = _trial(channels=0)
+    trial.units = "m"
+    with pytest.raises(FileFormatError, match="in mm"):
+        write_c3d(tmp_path / "m.c3d", trial)
+
+
+@pytest.mark.parametrize(
+    ("content", "cause"),
+    [
+        (b"", "not a readable C3D file"),
+        (b"\x02P" + b"\x00" * 100, "not a readable C3D file"),
+        (bytes(range(256)) * 8, "not a readable C3D file"),
+    ],
+)
+def test_garbage_is_refused(tmp_path: Path, content: bytes, cause: str) -> None:
+    path = tmp_path / "bad.c3d"
+    path.write_bytes(content)
+    with pytest.raises(RecordingError, match=cause) as info:
+        read_c3d(path)
+    assert str(path) in str(info.value)
+
+
+def test_missing_file_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="cannot read the file"):
+        read_c3d(tmp_path / "absent.c3d")
+
+
+def test_truncated_file_reads_what_is_there(tmp_path: Path) -> None:
+    path = tmp_path / "t.c3d"
+    trial = _trial(channels=0)
+    write_c3d(path, trial)
+    data = path.read_bytes()
+    path.write_bytes(data[:-1000])  # the last frames and the block padding are lost
+    back = read_c3d(path)
+    assert 0 < back.n_frames < trial.n_frames
+    assert np.array_equal(back.points, trial.points[: back.n_frames], equal_nan=True)
+    assert any("declared" in note for note in back.metadata["notes"])
+
+
+def test_inconsistent_trial_is_refused(tmp_path: Path) -> None:
+    trial = _trial()
+    trial.analog = trial.analog[:-1]
+    with pytest.raises(FileFormatError, match="analog samples"):
+        write_c3d(tmp_path / "x.c3d", trial)
+    trial = _trial()
+    trial.labels = trial.labels[:-1]
+    with pytest.raises(FileFormatError, match="labels"):
+        write_c3d(tmp_path / "x.c3d", trial)
+    with pytest.raises(FileFormatError, match="cannot write"):
+        write_c3d(tmp_path / "no" / "dir.c3d", _trial())
