@@ -126,6 +126,8 @@ def _decode(
         scale = float(header.scale_factor)
     if scale == 0:
         raise FileFormatError(path, "POINT:SCALE and the header scale factor are both 0")
+    if abs(scale - float(header.scale_factor)) > 1e-6 * abs(scale):
+        notes.append(f"POINT:SCALE {scale:g} used; the header says {header.scale_factor:g}")
     is_float = scale < 0
     point_rate = _param(reader, "POINT:RATE", "float") or float(header.frame_rate)
     if not point_rate > 0:

@@ -210,6 +210,13 @@ def test_units_are_converted_to_mm(shared_data: Path) -> None:
     assert 500 < span < 20000, span
 
 
+def test_scale_disagreement_is_noted(shared_data: Path) -> None:
+    """MACsample: POINT:SCALE 0.02154, header 0.05511; the parameter is used, the note says so."""
+    trial = _read(shared_data, "c3d_org_samples/sample06/MACsample.c3d")
+    assert trial.metadata["point_scale"] == pytest.approx(0.021541, abs=1e-6)
+    assert any("header says 0.0551" in note for note in trial.metadata["notes"])
+
+
 def test_simi_all_residuals_invalid(shared_data: Path) -> None:
     trial = _read(shared_data, "c3d_org_samples/sample16/basketball.c3d")
     assert trial.points.shape == (34, 22, 3)

@@ -185,3 +185,32 @@ def test_inconsistent_trial_is_refused(tmp_path: Path) -> None:
         write_c3d(tmp_path / "x.c3d", trial)
     with pytest.raises(FileFormatError, match="cannot write"):
         write_c3d(tmp_path / "no" / "dir.c3d", _trial())
+
+
+def test_damaged_files_are_read_or_refused(shared_data: Path, tmp_path: Path) -> None:
+    """Seeded truncations and byte changes: a Trial or a FileFormatError, nothing else."""
+    rng = np.random.default_rng(11)
+    sources = [
+        shared_data / "c3d_org_samples/sample02/pc_int.c3d",
+        shared_data / "c3d_org_samples/sample02/dec_real.c3d",
+        shared_data / "c3d_org_samples/sample02/sgi_real.c3d",
+    ]
+    originals = [p.read_bytes() for p in sources]
+    path = tmp_path / "damaged.c3d"
+    outcomes = {"read": 0, "refused": 0}
+    for k in range(240):
+        data = bytearray(originals[k % len(originals)])
+        if k % 3 == 0:
+            data = data[: int(rng.integers(0, len(data)))]
+        else:
+            limit = 512 * 2 if k % 3 == 1 else len(data)  # header and parameters, or anywhere
+            for _ in range(int(rng.integers(1, 20))):
+                data[int(rng.integers(0, limit))] = int(rng.integers(0, 256))
+        path.write_bytes(bytes(data))
+        try:
+            read_c3d(path)
+            outcomes["read"] += 1
+        except FileFormatError as exc:
+            assert str(exc).startswith(str(path))
+            outcomes["refused"] += 1
+    assert outcomes["read"] > 0 and outcomes["refused"] > 0
