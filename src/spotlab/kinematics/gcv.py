@@ -17,8 +17,8 @@ the penalty is ``(m!)^2 f^T Q R^-1 Q^T f`` and the fit is Reinsch's
 a banded system of half-bandwidth m. Unlike the normal equations in a
 B-spline basis it stays well conditioned as p grows: Q^T annihilates the
 polynomials of degree < m exactly, so the limit p -> infinity is the weighted
-least-squares polynomial. ``tr(I - A) = p (m!)^2 tr(W^-1 Q Sigma Q^T)`` with
-Sigma the inverse of the banded matrix needs only Sigma's band.
+least-squares polynomial. ``tr(I - A) = (N - m) - tr(Sigma R)`` with Sigma the
+inverse of the banded matrix needs only Sigma's band.
 """
 
 from __future__ import annotations
@@ -105,12 +105,14 @@ class PenalisedSpline:
         fitted, chol = self.solve(p, y)
         n = self.n_eff
         msr = (self.w[:, None] * (y - fitted) ** 2).sum(axis=0) / n
+        # tr(I - A) = p (m!)^2 tr(Sigma Q^T W^-1 Q) = tr(Sigma (M - R)) = (N - m) - tr(Sigma R):
+        # only Sigma's band is needed, and no large divided differences enter
         band = _banded.inverse_band(chol)
-        rdof = (
-            p
-            * self.factorial2
-            * float(_banded.residual_hat_diagonal(self.q, self.winv, band).sum())
-        )
+        rows = self.r.shape[1]
+        trace_sr = float(np.dot(band[:, 0], self.r[self.m]))
+        for d in range(1, self.m + 1):
+            trace_sr += 2.0 * float(np.dot(band[: rows - d, d], self.r[self.m - d, d:]))
+        rdof = rows - trace_sr
         rdof = max(rdof, np.finfo(float).tiny)
         gcv = msr / (rdof / n) ** 2
         return fitted, FitStatistics(msr=msr, dof=n - rdof, gcv=gcv, variance=msr * n / rdof)
@@ -163,7 +165,13 @@ def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
 
     lo, hi = problem.log_p_range
     hi += 6.0
-    if excess(hi) <= 0.0:
+    while True:  # very large p is singular to working precision for long records
+        try:
+            top = excess(hi)
+            break
+        except linalg.LinAlgError:
+            hi -= 1.0
+    if top <= 0.0:
         return float(10.0**hi)
     while excess(lo) > 0.0:
         lo -= 6.0

@@ -162,7 +162,13 @@ class SmoothingSpline:
                 pj = minimise_gcv(problem, col)
             else:
                 pj = solve_wood_jennings(problem, col)
-            fitted, st = problem.statistics(pj, col)
+            try:
+                fitted, st = problem.statistics(pj, col)
+            except np.linalg.LinAlgError as exc:
+                raise KinematicsError(
+                    f"p = {pj:g} is too large for these {col.shape[0]} samples: the banded "
+                    "system is singular to working precision; use a smaller p"
+                ) from exc
             fits.append(BSpline.construct_fast(*self._natural(tt[keep], fitted[:, 0], degree)))
             stats.append((pj, st))
         self._fits = fits

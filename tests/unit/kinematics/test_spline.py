@@ -148,6 +148,12 @@ def test_errors(t: np.ndarray, y: np.ndarray, kwargs: dict[str, object], match: 
     assert isinstance(info.value, SpotlabError) and isinstance(info.value, ValueError)
 
 
+def test_p_too_large_for_the_record() -> None:
+    t = np.arange(20_000) * 0.01
+    with pytest.raises(KinematicsError, match="too large"):
+        SmoothingSpline(t, np.sin(t), degree=5, p=1e30)
+
+
 @pytest.mark.parametrize(
     ("x", "nu", "match"), [(np.array([0.5]), 4, "nu"), (np.array([np.nan]), 0, "finite")]
 )
