@@ -225,6 +225,21 @@ def dlt_calibrate(
     many residuals as parameters). Without distortion the refined camera is again an
     exact 11-parameter DLT. References: Abdel-Aziz & Karara (1971); Marzan & Karara
     (1975); Hartley, "In defense of the eight-point algorithm", IEEE PAMI 19(6), 1997.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from spotlab.calibration import dlt_calibrate
+    >>> from spotlab.geometry import Camera
+    >>> K = [[1200.0, 0.0, 640.0], [0.0, 1200.0, 480.0], [0.0, 0.0, 1.0]]
+    >>> truth = Camera(K, None, np.eye(3), [0.0, 0.0, 3000.0], (1280, 960))
+    >>> corners = [[x, y, z] for x in (0, 500) for y in (0, 400) for z in (0, 300)]
+    >>> X = np.array(corners, dtype=float) - [250.0, 200.0, 150.0]
+    >>> result = dlt_calibrate(X, truth.project(X), image_size=(1280, 960))
+    >>> bool(result.rms_px < 1e-9), result.coefficients.shape
+    (True, (11,))
+    >>> bool(np.allclose(result.camera.K, K))
+    True
     """
     X, uv = _check_inputs(object_points, image_points)
     terms = _distortion_terms(distortion)

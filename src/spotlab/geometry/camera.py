@@ -47,6 +47,20 @@ class Camera:
     ``projectPoints`` ignores ``K[0, 1]``). The collinearity condition is Woltring &
     Huiskes (1990) Eq. 1; the linear intrinsics are Eq. 11 with the shear in the
     upper triangle (Hartley & Zisserman's convention) rather than Woltring's lower one.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from spotlab.geometry import Camera
+    >>> K = [[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]]
+    >>> cam = Camera(K, None, np.eye(3), [0.0, 0.0, 2000.0], (640, 480), name="front")
+    >>> cam.project([[100.0, -50.0, 0.0]])
+    array([[370., 215.]])
+    >>> float(cam.center[2])  # the perspective centre, 2 m behind the origin
+    -2000.0
+    >>> back = Camera.from_dlt(cam.to_dlt(), cam.size)
+    >>> bool(np.allclose(back.K, cam.K) and np.allclose(back.t, cam.t))
+    True
     """
 
     __slots__ = ("K", "R", "dist", "name", "size", "t")
