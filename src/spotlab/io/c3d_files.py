@@ -30,6 +30,11 @@ def _import_c3d(path: str | Path) -> Any:
     return c3d
 
 
+def _clean(text: object) -> str:
+    """A parameter string without its padding (spaces, and NULs some writers use)."""
+    return str(text).replace("\x00", " ").strip()
+
+
 def _param(reader: Any, key: str, kind: str) -> Any:
     """A parameter's value, or None when absent or unreadable."""
     param = reader.get(key)
@@ -43,9 +48,9 @@ def _param(reader: Any, key: str, kind: str) -> Any:
         if kind == "float":
             return float(param.float_value)
         if kind == "strings":
-            return [str(s).strip() for s in np.ravel(param.string_array)]
+            return [_clean(s) for s in np.ravel(param.string_array)]
         if kind == "string":
-            return str(param.string_value).strip()
+            return _clean(param.string_value)
         if kind == "floats":
             return np.asarray(param.float_array, dtype=np.float64).ravel()
         if kind == "int16s":
