@@ -1,6 +1,7 @@
 """Recording journals and exchange files (C3D, TRC, calibration files)."""
 
-from spotlab.io.c3d_files import read_c3d, write_c3d
+from spotlab.io.c3d_files import read_c3d
+from spotlab.io.c3d_writer import write_c3d
 from spotlab.io.trc_files import read_trc, write_trc
 from spotlab.io.trial import FileFormatError, Trial
 
