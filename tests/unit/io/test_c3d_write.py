@@ -214,3 +214,11 @@ def test_damaged_files_are_read_or_refused(shared_data: Path, tmp_path: Path) ->
             assert str(exc).startswith(str(path))
             outcomes["refused"] += 1
     assert outcomes["read"] > 0 and outcomes["refused"] > 0
+
+
+def test_without_the_c3d_package(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setitem(sys.modules, "c3d", None)  # import c3d now raises ImportError
+    with pytest.raises(FileFormatError, match=r"needs the 'c3d' package"):
+        read_c3d(tmp_path / "any.c3d")
+    with pytest.raises(FileFormatError, match=r"pip install 'spotlab\[c3d\]'"):
+        write_c3d(tmp_path / "any.c3d", _trial())
