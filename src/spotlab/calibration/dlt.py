@@ -263,7 +263,8 @@ def dlt_calibrate(
         raise CalibrationError(
             "the control points lie behind the calibrated camera: the image axes and the "
             "world axes have opposite handedness (v measured upwards, or a left-handed "
-            "world frame); flip v to v' = height - v or mirror one world axis"
+            "world frame); flip v to v' = height - v or mirror one world axis "
+            "(coefficients of such data: Camera.from_dlt(..., v_up=True))"
         )
     linear_resid = uv - camera.project(X)
     residuals, iterations = linear_resid, 0

@@ -12,7 +12,35 @@ from spotlab.geometry import _checks
 from spotlab.geometry._checks import FloatArray
 from spotlab.geometry.distortion import distort_normalized, undistort_normalized
 
-__all__ = ["Camera"]
+__all__ = ["Camera", "flip_dlt_v"]
+
+
+def flip_dlt_v(L: Any, height: float) -> FloatArray:
+    """DLT parameters for the image row axis turned over: ``v' = height - v``.
+
+    Parameters
+    ----------
+    L : array_like, shape (11,)
+        DLT parameters for one image convention.
+    height : float
+        Image height (px).
+
+    Returns
+    -------
+    ndarray, shape (11,)
+        The parameters for the other convention; applying the function twice gives
+        ``L`` back. DLTdv and easyWand measure ``v`` upwards from the bottom edge,
+        spotlab (like OpenCV) downwards from the top.
+
+    Notes
+    -----
+    ``v' = height - (L5 X + L6 Y + L7 Z + L8) / D`` with ``D = L9 X + L10 Y + L11 Z + 1``,
+    so ``L5..L7' = height L9..L11 - L5..L7`` and ``L8' = height - L8``.
+    """
+    out = _checks.finite_array(L, (11,), "L (DLT parameters)")
+    out[4:7] = height * out[8:11] - out[4:7]
+    out[7] = height - out[7]
+    return out
 
 
 class Camera:
@@ -169,8 +197,14 @@ class Camera:
         uv = _checks.points(uv, 2, "uv (image points)")
         return self._to_pixels(distort_normalized(self._from_pixels(uv), self.dist))
 
-    def to_dlt(self) -> FloatArray:
+    def to_dlt(self, *, v_up: bool = False) -> FloatArray:
         """The 11 DLT parameters of the linear part of the camera (distortion ignored).
+
+        Parameters
+        ----------
+        v_up : bool
+            Give the parameters for image rows counted upwards from the bottom edge
+            (DLTdv, easyWand): ``v_up = height - v`` (see :func:`flip_dlt_v`).
 
         Returns
         -------
@@ -196,10 +230,11 @@ class Camera:
                 "to_dlt: the world origin lies in the camera's principal plane (t_z = 0); "
                 "the DLT normalisation L12 = 1 is undefined"
             )
-        return (P / P[2, 3]).ravel()[:11].copy()
+        L = (P / P[2, 3]).ravel()[:11].copy()
+        return flip_dlt_v(L, self.size[1]) if v_up else L
 
     @classmethod
-    def from_dlt(cls, L: Any, size: Any, name: str = "") -> Camera:
+    def from_dlt(cls, L: Any, size: Any, name: str = "", *, v_up: bool = False) -> Camera:
         """The camera of 11 DLT parameters, by RQ decomposition.
 
         Parameters
@@ -210,6 +245,11 @@ class Camera:
             Image ``(width, height)`` in pixels.
         name : str
             Camera label.
+        v_up : bool
+            ``L`` is for image rows counted upwards from the bottom edge (DLTdv,
+            easyWand); it is converted with :func:`flip_dlt_v` first. Without it such
+            coefficients give a camera with the scene behind it (``project`` -> NaN):
+            no proper rotation maps a right-handed world onto left-handed image axes.
 
         Returns
         -------
@@ -231,6 +271,8 @@ class Camera:
         back-substitution").
         """
         L = _checks.finite_array(L, (11,), "L (DLT parameters)")
+        if v_up:
+            L = flip_dlt_v(L, _checks.image_size(size)[1])
         P = np.append(L, 1.0).reshape(3, 4)
         M = P[:, :3]
         det = float(np.linalg.det(M))
