@@ -86,7 +86,7 @@ class SmoothingSpline:
     Parameterisation and figures are those of GCVSPL (Woltring 1986, Adv Eng
     Software 8:104-113): ``p``, ``msr``, ``residual_dof`` and ``variance``
     agree with its WK(4), WK(2), WK(3), WK(6). Per-sample errors follow Wood
-    & Jennings (1979, Comput Programs Biomed 10:236-251) as used by Yeadon
+    & Jennings (1979, J Biomech 12:477-479) as used by Yeadon
     (1990). Outside ``[t_1, t_N]`` the spline is its natural extension, a
     polynomial of degree m - 1.
 
