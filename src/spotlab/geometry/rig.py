@@ -86,7 +86,8 @@ class Rig:
     def save(self, path: _PathLike) -> None:
         """Write the rig as an anipose / Pose2Sim calibration TOML file.
 
-        One table ``[cam_<i>]`` per camera with ``name``, ``size`` (width, height),
+        One table ``[cam_<i>]`` per camera (``i`` zero-padded beyond 10 cameras, so
+        that anipose's sorted reading keeps the rig order) with ``name``, ``size`` (width, height),
         ``matrix`` (K), ``distortions`` (k1, k2, p1, p2, k3), ``rotation`` (Rodrigues
         vector of ``R``, radians) and ``translation`` (``t``), then ``[metadata]``.
         Values are written as they are: spotlab works in mm, so ``translation`` is in
@@ -94,10 +95,13 @@ class Rig:
         written with ``repr`` so a load gives back the same numbers.
         """
         lines: list[str] = []
+        # Zero-padded keys when there are more than 10 cameras: aniposelib's
+        # CameraGroup.load sorts the table names as strings (cam_10 before cam_2).
+        width = len(str(len(self.cameras) - 1))
         for i, cam in enumerate(self.cameras):
             rvec = Rotation.from_matrix(cam.R).as_rotvec()
             lines += [
-                f"[cam_{i}]",
+                f"[cam_{i:0{width}d}]",
                 f"name = {json.dumps(cam.name)}",
                 f"size = [ {cam.size[0]}, {cam.size[1]},]",
                 "matrix = [ " + " ".join(_toml_array(row) + "," for row in cam.K) + "]",
@@ -111,14 +115,18 @@ class Rig:
             fh.write("\n".join(lines))
 
     @classmethod
-    def load(cls, path: _PathLike) -> Rig:
+    def load(cls, path: _PathLike, *, sort_tables: bool = False) -> Rig:
         """Read an anipose / Pose2Sim calibration TOML file.
 
-        Every top-level table except ``metadata`` is a camera, in file order; a missing
-        ``name`` defaults to the table's key. Pose2Sim's 4 distortion terms mean
-        ``k3 = 0``. Values are kept as they are (no unit conversion): anipose and
-        Pose2Sim translations are in the unit of the calibration object used (often m),
-        spotlab's are in mm; convert with ``Camera(K, dist, R, t * 1000, size)``.
+        Every top-level table except ``metadata`` is a camera, in file order (as
+        Pose2Sim reads it), or with ``sort_tables=True`` in the order of the table names
+        sorted as strings, as aniposelib's ``CameraGroup.load`` does (``cam_0, cam_1,
+        cam_10, cam_11, cam_2, ...``: it differs from the file order beyond 10 cameras
+        when the names are not zero-padded). A missing ``name`` defaults to the key.
+        Pose2Sim's 4 distortion terms mean ``k3 = 0``. Values are kept as they are (no
+        unit conversion): anipose and Pose2Sim translations are in the unit of the
+        calibration object used (often m), spotlab's are in mm; convert with
+        ``Camera(K, dist, R, t * 1000, size)``.
 
         Raises
         ------
@@ -132,7 +140,9 @@ class Rig:
         except tomllib.TOMLDecodeError as exc:
             raise CalibrationError(f"{os.fspath(path)}: not a valid TOML file: {exc}") from None
         cams = []
-        for key, table in doc.items():
+        keys = sorted(doc) if sort_tables else list(doc)
+        for key in keys:
+            table = doc[key]
             if key == "metadata" or not isinstance(table, dict):
                 continue
             try:

@@ -72,6 +72,17 @@ def test_reads_the_real_anipose_file(shared_data: Path, tmp_path: Path) -> None:
         assert_allclose(b.t, a.t, rtol=0, atol=0)
 
 
+def test_table_order_beyond_ten_cameras(shared_data: Path, tmp_path: Path) -> None:
+    path = shared_data / ANIPOSE
+    sorted_names = Rig.load(path, sort_tables=True).names
+    assert sorted_names[:4] == ["10", "11", "20", "21"]  # cam_0, cam_1, cam_10, cam_11
+    rig = Rig.load(path)
+    rig.save(tmp_path / "padded.toml")
+    assert "[cam_00]" in (tmp_path / "padded.toml").read_text()
+    # Zero-padded keys: anipose's sorted reading and the file order agree.
+    assert Rig.load(tmp_path / "padded.toml", sort_tables=True).names == rig.names
+
+
 def test_pose2sim_four_distortions(tmp_path: Path) -> None:
     path = tmp_path / "p2s.toml"
     path.write_text(
