@@ -2,14 +2,13 @@
 
 Everything here is O(n) in time and memory: matrices are held as their
 diagonals (LAPACK upper band storage, ``ab[bw + i - j, j] = a[i, j]``) or as
-sparse matrices with a fixed number of entries per row; nothing is N x N.
+per-row arrays of the few non-zero entries; nothing is N x N.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import sparse
 from scipy.interpolate import BSpline
 
 FloatArray = NDArray[np.float64]
@@ -29,23 +28,51 @@ def divided_differences(x: FloatArray, m: int) -> FloatArray:
     return q
 
 
-def divided_difference_matrix(q: FloatArray, n: int) -> sparse.csr_matrix:
-    """The sparse (N - m) x N matrix ``Q^T`` of :func:`divided_differences`."""
+def qt_times(q: FloatArray, y: FloatArray) -> FloatArray:
+    """``Q^T y`` for y of shape (N, K); shape (N - m, K)."""
     rows, width = q.shape
-    j = np.repeat(np.arange(rows), width)
-    i = (np.arange(rows)[:, None] + np.arange(width)[None, :]).ravel()
-    return sparse.csr_matrix((q.ravel(), (j, i)), shape=(rows, n))
+    out = np.zeros((rows, y.shape[1]))
+    for a in range(width):
+        out += q[:, a : a + 1] * y[a : a + rows]
+    return out
 
 
-def bspline_gram(x: FloatArray, m: int) -> sparse.csr_matrix:
+def q_times(q: FloatArray, delta: FloatArray) -> FloatArray:
+    """``Q delta`` for delta of shape (N - m, K); shape (N, K)."""
+    rows, width = q.shape
+    out = np.zeros((rows + width - 1, delta.shape[1]))
+    for a in range(width):
+        out[a : a + rows] += q[:, a : a + 1] * delta
+    return out
+
+
+def qwq_band(q: FloatArray, winv: FloatArray) -> FloatArray:
+    """Upper band storage (m + 1, N - m) of ``Q^T W^-1 Q``.
+
+    Entry (j, j + d) is ``sum_a q[j, a] q[j + d, a - d] / w[j + a]``, a = d .. m.
+    """
+    rows, width = q.shape
+    m = width - 1
+    ab = np.zeros((width, rows))
+    for d in range(width):
+        acc = np.zeros(rows - d)
+        for a in range(d, width):
+            acc += q[: rows - d, a] * q[d:, a - d] * winv[a : a + rows - d]
+        ab[m - d, d:] = acc
+    return ab
+
+
+def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     """Gram matrix ``R_jk = integral N_j N_k`` of the order-m B-splines on knots x.
 
     ``N_j`` has knots ``x_j .. x_{j+m}`` and unit integral, so that
     ``f[x_j..x_{j+m}] = (1/m!) integral N_j f^(m)`` (Peano kernel). Products
     have degree 2m - 2; an m-point Gauss-Legendre rule per interval is exact.
-    Shape (N - m, N - m), half-bandwidth m - 1.
+    Returned in upper band storage of half-bandwidth m (its own is m - 1),
+    shape (m + 1, N - m).
     """
     n = x.size
+    rows = n - m
     nodes, weights = np.polynomial.legendre.leggauss(m)
     h = np.diff(x)
     mid = 0.5 * (x[1:] + x[:-1])
@@ -54,17 +81,21 @@ def bspline_gram(x: FloatArray, m: int) -> sparse.csr_matrix:
     # m - 1 extra knots each side put every sample interval inside the base interval
     pad = np.arange(1, m)
     knots = np.concatenate([x[0] - pad[::-1] * h[0], x, x[-1] + pad * h[-1]])
-    phi = BSpline.design_matrix(points, knots, m - 1).tocsc()[:, m - 1 : m - 1 + n - m]
-    phi = phi @ sparse.diags(m / (x[m:] - x[: n - m]))
-    return (phi.T @ sparse.diags(qw) @ phi).tocsr()
-
-
-def sparse_band(mat: sparse.csr_matrix, bw: int) -> FloatArray:
-    """Upper band storage of a symmetric sparse matrix of half-bandwidth ``bw``."""
-    n = mat.shape[0]
-    ab = np.zeros((bw + 1, n))
-    for d in range(bw + 1):
-        ab[bw - d, d:] = mat.diagonal(d)
+    dm = BSpline.design_matrix(points, knots, m - 1).tocsr()
+    if dm.nnz != m * points.size:  # pragma: no cover - scipy stores m entries per row
+        raise AssertionError("unexpected design-matrix structure")
+    vals = dm.data.reshape(-1, m)
+    first = dm.indices.reshape(-1, m)[:, 0] - (m - 1)
+    scale = np.zeros(rows + m + 1)
+    scale[:rows] = m / (x[m:] - x[:rows])
+    ab = np.zeros((m + 1, rows))
+    for a in range(m):
+        ca = first + a
+        for b in range(a, m):
+            cb = first + b
+            ok = (ca >= 0) & (cb < rows)
+            contrib = qw[ok] * vals[ok, a] * vals[ok, b] * scale[ca[ok]] * scale[cb[ok]]
+            ab[m - (b - a)] += np.bincount(cb[ok], weights=contrib, minlength=rows)
     return ab
 
 
@@ -96,30 +127,30 @@ def inverse_band(chol: FloatArray) -> FloatArray:
     for d in range(1, bw + 1):
         coupling[: n - d, d - 1] = chol[bw - d, d:] / diag[: n - d]
     source[:n] = 1.0 / diag**2
-    starts = np.arange(blocks) * length
+    # block b, step j is sample b * length + j: views, no gathers, in the loops
+    coupling_bj = coupling.reshape(blocks, length, bw)
+    source_bj = source.reshape(blocks, length)
 
-    def step(x: FloatArray, i: NDArray[np.intp]) -> FloatArray:
-        # T x T^T + source e1 e1^T for a batch of windows, T = [[-c], [I, 0]]
+    def apply_t(c: FloatArray, x: FloatArray) -> FloatArray:
+        # T x for a batch, T = [[-c], [I, 0]] (the companion matrix of row i of U)
         tx = np.empty_like(x)
-        tx[:, 0, :] = -np.einsum("bk,bkl->bl", coupling[i], x)
+        tx[:, 0, :] = -np.einsum("bk,bkl->bl", c, x)
         tx[:, 1:, :] = x[:, :-1, :]
-        out = np.empty_like(x)
-        out[:, :, 0] = -np.einsum("bk,bjk->bj", coupling[i], tx)
-        out[:, :, 1:] = tx[:, :, :-1]
-        out[:, 0, 0] += source[i]
+        return tx
+
+    def step(x: FloatArray, j: int) -> FloatArray:
+        # T x T^T + source e1 e1^T
+        c = coupling_bj[:, j]
+        out = apply_t(c, apply_t(c, x).transpose(0, 2, 1))
+        out[:, 0, 0] += source_bj[:, j]
         return out
 
     # 1. each block's map X -> phi X phi^T + psi
-    eye = np.broadcast_to(np.eye(bw), (blocks, bw, bw))
-    phi = eye.copy()
+    phi = np.broadcast_to(np.eye(bw), (blocks, bw, bw)).copy()
     psi = np.zeros((blocks, bw, bw))
     for j in range(length - 1, -1, -1):
-        i = starts + j
-        tphi = np.empty_like(phi)
-        tphi[:, 0, :] = -np.einsum("bk,bkl->bl", coupling[i], phi)
-        tphi[:, 1:, :] = phi[:, :-1, :]
-        phi = tphi
-        psi = step(psi, i)
+        phi = apply_t(coupling_bj[:, j], phi)
+        psi = step(psi, j)
     # 2. the window at the end of each block
     ends = np.zeros((blocks, bw, bw))
     x = np.zeros((bw, bw))
@@ -127,11 +158,11 @@ def inverse_band(chol: FloatArray) -> FloatArray:
         ends[b] = x
         x = phi[b] @ x @ phi[b].T + psi[b]
     # 3. all blocks from their ends at once
-    s = np.zeros((total, bw + 1))
+    s = np.zeros((blocks, length, bw + 1))
     x_batch = ends
     for j in range(length - 1, -1, -1):
-        i = starts + j
-        s[i, bw] = -np.einsum("bk,bk->b", coupling[i], x_batch[:, :, bw - 1])
-        x_batch = step(x_batch, i)
-        s[i, :bw] = x_batch[:, 0, :]
+        s[:, j, bw] = -np.einsum("bk,bk->b", coupling_bj[:, j], x_batch[:, :, bw - 1])
+        x_batch = step(x_batch, j)
+        s[:, j, :bw] = x_batch[:, 0, :]
+    s = s.reshape(total, bw + 1)
     return s[:n]

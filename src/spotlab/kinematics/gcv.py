@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, optimize, sparse
+from scipy import linalg, optimize
 
 from spotlab.kinematics import _banded
 
@@ -76,10 +76,8 @@ class PenalisedSpline:
         self.winv = 1.0 / w
         self.n_eff = x.size
         self.q = _banded.divided_differences(x, m)
-        qt = _banded.divided_difference_matrix(self.q, x.size)
-        self.qt = qt
-        self.r = _banded.sparse_band(_banded.bspline_gram(x, m), m)
-        self.qwq = _banded.sparse_band((qt @ sparse.diags(self.winv) @ qt.T).tocsr(), m)
+        self.r = _banded.bspline_gram_band(x, m)
+        self.qwq = _banded.qwq_band(self.q, self.winv)
         self.factorial2 = float(math.factorial(m) ** 2)
         # p where the fit goes from near-interpolation (spline wavelength ~ the median
         # sample spacing) to the polynomial (wavelength ~ the record): the search range
@@ -96,8 +94,9 @@ class PenalisedSpline:
         chol = np.asarray(
             linalg.cholesky_banded(self.r + pp * self.qwq, lower=False, check_finite=False)
         )
-        delta = linalg.cho_solve_banded((chol, False), np.asarray(self.qt @ y), check_finite=False)
-        fitted = y - pp * self.winv[:, None] * np.asarray(self.qt.T @ delta)
+        rhs = _banded.qt_times(self.q, y)
+        delta = linalg.cho_solve_banded((chol, False), rhs, check_finite=False)
+        fitted = y - pp * self.winv[:, None] * _banded.q_times(self.q, delta)
         return fitted, chol
 
     def statistics(self, p: float, y: FloatArray) -> tuple[FloatArray, FitStatistics]:
@@ -128,23 +127,23 @@ def _gcv_at(problem: PenalisedSpline, y: FloatArray, log_p: float) -> float:
     return float(stats.gcv[0])
 
 
-def minimise_gcv(problem: PenalisedSpline, y: FloatArray) -> float:
+def minimise_gcv(problem: PenalisedSpline, y: FloatArray, step: float = 2.0) -> float:
     """Smoothing parameter minimising GCV for one channel y (N, 1).
 
-    A scan over ``log10 p`` with one point per decade across the whole range
-    from near-interpolation to the polynomial brackets the global minimum;
-    bounded Brent refinement then locates it to 1e-7 in log10 p (GCVSPL
-    searches log p by golden section and parabolic steps as well).
+    A scan over ``log10 p`` with one point per ``step`` decades across the
+    whole range from near-interpolation to the polynomial brackets the global
+    minimum; bounded Brent refinement then locates it to 1e-6 in log10 p
+    (GCVSPL searches log p by golden section and parabolic steps as well).
     """
     lo, hi = problem.log_p_range
-    grid = np.arange(lo, hi + 1.0)
+    grid = np.arange(lo, hi + step, step)
     values = np.array([_gcv_at(problem, y, g) for g in grid])
     if not np.any(np.isfinite(values)):
         return float(10.0 ** grid[-1])
     best = int(np.argmin(values))
     a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
     res = optimize.minimize_scalar(
-        lambda g: _gcv_at(problem, y, g), bounds=(a, b), method="bounded", options={"xatol": 1e-7}
+        lambda g: _gcv_at(problem, y, g), bounds=(a, b), method="bounded", options={"xatol": 1e-6}
     )
     return float(10.0**res.x) if res.fun <= values[best] else float(10.0 ** grid[best])
 
