@@ -34,7 +34,8 @@ class SmoothingSpline:
     degree : {5, 3}
         Spline degree 2m - 1: 5 (quintic, m = 3) or 3 (cubic, m = 2).
     p : float, optional
-        Fixed smoothing parameter (in ``y``-units^2 s^(2m-1) per unit weight), > 0.
+        Fixed smoothing parameter, > 0, in (weight units) s^(2m-1): s^(2m-1)
+        with unit weights, s^(2m-1) / y-units^2 with ``sigma``.
 
     Attributes
     ----------
