@@ -67,7 +67,7 @@ class PlanarCalibration:
     iterations: int
 
 
-def _grid(object_points: Any) -> FloatArray:
+def check_grid(object_points: Any) -> FloatArray:
     """Grid points (P, 3) with Z = 0, validated."""
     model = np.asarray(object_points, dtype=np.float64)
     if model.ndim != 2 or model.shape[1] not in (2, 3):
@@ -342,7 +342,7 @@ def calibrate_intrinsics(
     Reference: Z. Zhang, "A flexible new technique for camera calibration", IEEE TPAMI
     22(11):1330-1334, 2000 (MSR-TR-98-71).
     """
-    model = _grid(object_points)
+    model = check_grid(object_points)
     uv = view_points(image_points, model.shape[0])
     if uv.ndim != 3:
         raise CalibrationError(f"image_points must have shape (V, P, 2), got {uv.shape}")
