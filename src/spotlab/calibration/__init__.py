@@ -7,14 +7,21 @@ from spotlab.calibration.dlt import (
     dlt_reconstruct_on_plane,
 )
 from spotlab.calibration.iac import IacResult, intrinsics_from_orthogonal_vanishing_points
+from spotlab.calibration.planar import PlanarCalibration, calibrate_intrinsics, fit_homography
+from spotlab.calibration.smac import SmacCalibration, smac_calibrate
 from spotlab.calibration.vanishing import vanishing_point
 
 __all__ = [
     "DISTORTION_TERMS",
     "DltResult",
     "IacResult",
+    "PlanarCalibration",
+    "SmacCalibration",
+    "calibrate_intrinsics",
     "dlt_calibrate",
     "dlt_reconstruct_on_plane",
+    "fit_homography",
     "intrinsics_from_orthogonal_vanishing_points",
+    "smac_calibrate",
     "vanishing_point",
 ]
