@@ -195,6 +195,8 @@ def intrinsics_from_orthogonal_vanishing_points(
         columns[0] = full[(0, 0)] + full[(1, 1)]
     A = np.column_stack(columns)
     A /= np.linalg.norm(A, axis=1, keepdims=True)
+    if A.shape[0] < A.shape[1]:  # the minimal case: pad so the null vector is the last row
+        A = np.vstack([A, np.zeros((A.shape[1] - A.shape[0], A.shape[1]))])
     _, sv, vt = np.linalg.svd(A, full_matrices=False)
     condition = float(sv[-2] / sv[0])
     if condition < _RANK_TOL:
