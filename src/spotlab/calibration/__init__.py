@@ -7,12 +7,14 @@ from spotlab.calibration.dlt import (
     dlt_reconstruct_on_plane,
 )
 from spotlab.calibration.iac import IacResult, intrinsics_from_orthogonal_vanishing_points
+from spotlab.calibration.linearisation import DetectorLinearisation, fit_linearisation
 from spotlab.calibration.planar import PlanarCalibration, calibrate_intrinsics, fit_homography
 from spotlab.calibration.smac import SmacCalibration, smac_calibrate
 from spotlab.calibration.vanishing import vanishing_point
 
 __all__ = [
     "DISTORTION_TERMS",
+    "DetectorLinearisation",
     "DltResult",
     "IacResult",
     "PlanarCalibration",
@@ -21,6 +23,7 @@ __all__ = [
     "dlt_calibrate",
     "dlt_reconstruct_on_plane",
     "fit_homography",
+    "fit_linearisation",
     "intrinsics_from_orthogonal_vanishing_points",
     "smac_calibrate",
     "vanishing_point",
