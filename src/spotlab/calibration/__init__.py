@@ -9,8 +9,10 @@ from spotlab.calibration.dlt import (
 from spotlab.calibration.iac import IacResult, intrinsics_from_orthogonal_vanishing_points
 from spotlab.calibration.linearisation import DetectorLinearisation, fit_linearisation
 from spotlab.calibration.planar import PlanarCalibration, calibrate_intrinsics, fit_homography
+from spotlab.calibration.report import quality_report, write_report_figure
 from spotlab.calibration.smac import SmacCalibration, smac_calibrate
 from spotlab.calibration.vanishing import vanishing_point
+from spotlab.calibration.wand import WandCalibration, wand_calibrate
 
 __all__ = [
     "DISTORTION_TERMS",
@@ -19,12 +21,16 @@ __all__ = [
     "IacResult",
     "PlanarCalibration",
     "SmacCalibration",
+    "WandCalibration",
     "calibrate_intrinsics",
     "dlt_calibrate",
     "dlt_reconstruct_on_plane",
     "fit_homography",
     "fit_linearisation",
     "intrinsics_from_orthogonal_vanishing_points",
+    "quality_report",
     "smac_calibrate",
     "vanishing_point",
+    "wand_calibrate",
+    "write_report_figure",
 ]

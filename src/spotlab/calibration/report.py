@@ -1,0 +1,261 @@
+"""Quality report of a rig calibration: residuals, wand length, coverage, a verdict, a PNG.
+
+The figures a lab checks before trusting a calibration (METHODS.md, "Quality report"):
+per camera reprojection RMS (px); the wand length triangulated freely from each frame
+(both ends independently, so the known length is not imposed) with its mean, standard
+deviation and largest error (mm); how much of each image and of the volume the wand
+covered; and a plain verdict with its reasons.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.calibration._rays import intersect
+from spotlab.geometry import Rig
+
+__all__ = ["VERDICT_LIMITS", "quality_report", "write_report_figure"]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: Verdict thresholds: (reprojection RMS px, wand SD as a fraction of its length,
+#: image coverage fraction) for "good" and for "acceptable".
+VERDICT_LIMITS = {"good": (0.5, 0.002, 0.5), "acceptable": (1.5, 0.01, 0.25)}
+
+_GRID = (16, 12)
+
+
+def _coverage(uv: FloatArray, size: tuple[int, int]) -> float:
+    """Fraction of a 16 x 12 grid of image cells holding at least one observation."""
+    uv = uv[np.all(np.isfinite(uv), axis=-1)]
+    if uv.size == 0:
+        return 0.0
+    w, h = size
+    i = np.clip((uv[:, 0] / w * _GRID[0]).astype(int), 0, _GRID[0] - 1)
+    j = np.clip((uv[:, 1] / h * _GRID[1]).astype(int), 0, _GRID[1] - 1)
+    return float(np.unique(i * _GRID[1] + j).size / (_GRID[0] * _GRID[1]))
+
+
+def _rms(r: FloatArray) -> float:
+    sq = np.sum(r * r, axis=-1)
+    sq = sq[np.isfinite(sq)]
+    return float(np.sqrt(np.mean(sq) / 2.0)) if sq.size else float("nan")
+
+
+def wand_lengths(rig: Rig, wand: FloatArray, inliers: BoolArray) -> FloatArray:
+    """Freely triangulated wand lengths (F,) (mm), NaN where an end has < 2 views."""
+    F, C = wand.shape[:2]
+    uv = np.where(inliers[..., None], wand, np.nan).transpose(1, 0, 2, 3).reshape(C, F * 2, 2)
+    X, _ = intersect(list(rig), uv)
+    ends = X.reshape(F, 2, 3)
+    return np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+
+
+def quality_report(
+    rig: Rig,
+    wand: FloatArray,
+    wand_length: float,
+    wand_residuals: FloatArray,
+    frame_residuals: FloatArray,
+    inliers: BoolArray,
+) -> dict[str, Any]:
+    """Quality figures of a wand calibration.
+
+    Parameters
+    ----------
+    rig : Rig
+        Calibrated cameras.
+    wand : ndarray, shape (F, C, 2, 2)
+        Wand image points (px), NaN where unseen.
+    wand_length : float
+        Nominal wand length (mm).
+    wand_residuals : ndarray, shape (F, C, 2, 2)
+        Reprojection residuals (px) of the adjusted wand ends.
+    frame_residuals : ndarray, shape (C, P, 2)
+        Residuals (px) of the reference object's markers.
+    inliers : ndarray of bool, shape (F, C, 2)
+        Observations kept after outlier rejection.
+
+    Returns
+    -------
+    dict
+        ``cameras`` (list, per camera: name, reprojection_rms_px, frame_rms_px,
+        observations, rejected, image_coverage), ``reprojection_rms_px``, ``wand``
+        (nominal_mm, frames, mean_mm, sd_mm, max_error_mm, rms_error_mm),
+        ``volume`` (min_mm, max_mm, filled_fraction) and ``verdict`` (grade, reasons).
+        Every value is a plain float, int, str or list (JSON-safe).
+    """
+    seen = np.all(np.isfinite(wand), axis=-1)
+    res_in = np.where(inliers[..., None], wand_residuals, np.nan)
+    cameras = []
+    for c, cam in enumerate(rig):
+        cameras.append(
+            {
+                "name": cam.name,
+                "reprojection_rms_px": _rms(res_in[:, c]),
+                "frame_rms_px": _rms(frame_residuals[c]),
+                "observations": int(np.count_nonzero(inliers[:, c])),
+                "rejected": int(np.count_nonzero(seen[:, c] & ~inliers[:, c])),
+                "image_coverage": _coverage(wand[:, c].reshape(-1, 2), cam.size),
+            }
+        )
+    lengths = wand_lengths(rig, wand, inliers)
+    lengths = lengths[np.isfinite(lengths)]
+    err = lengths - wand_length
+    wand_stats = {
+        "nominal_mm": float(wand_length),
+        "frames": int(lengths.size),
+        "mean_mm": float(np.mean(lengths)) if lengths.size else float("nan"),
+        "sd_mm": float(np.std(lengths, ddof=1)) if lengths.size > 1 else float("nan"),
+        "max_error_mm": float(np.max(np.abs(err))) if lengths.size else float("nan"),
+        "rms_error_mm": float(np.sqrt(np.mean(err**2))) if lengths.size else float("nan"),
+    }
+    F = wand.shape[0]
+    X, _ = intersect(
+        list(rig),
+        np.where(inliers[..., None], wand, np.nan)
+        .transpose(1, 0, 2, 3)
+        .reshape(len(rig), F * 2, 2),
+    )
+    X = X[np.all(np.isfinite(X), axis=1)]
+    volume: dict[str, Any] = {"min_mm": [], "max_mm": [], "filled_fraction": 0.0}
+    if len(X):
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        cells = np.clip(((X - lo) / np.maximum(hi - lo, 1e-9) * 8).astype(int), 0, 7)
+        volume = {
+            "min_mm": lo.tolist(),
+            "max_mm": hi.tolist(),
+            "filled_fraction": float(np.unique(cells @ [64, 8, 1]).size / 512),
+        }
+    overall = _rms(res_in)
+    return {
+        "cameras": cameras,
+        "reprojection_rms_px": overall,
+        "wand": wand_stats,
+        "volume": volume,
+        "verdict": _verdict(cameras, wand_stats),
+    }
+
+
+def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any]) -> dict[str, Any]:
+    """Grade ``good``, ``acceptable`` or ``poor`` with the reasons for anything less."""
+    reasons: list[str] = []
+    grade = "good"
+    for level in ("good", "acceptable"):
+        rms_max, sd_frac, cover_min = VERDICT_LIMITS[level]
+        failed = []
+        for cam in cameras:
+            if not cam["reprojection_rms_px"] <= rms_max:
+                failed.append(
+                    f"{cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3g} px "
+                    f"> {rms_max} px"
+                )
+            if not cam["image_coverage"] >= cover_min:
+                failed.append(
+                    f"{cam['name']}: the wand covered {100 * cam['image_coverage']:.0f} % of "
+                    f"the image (< {100 * cover_min:.0f} %); distortion is poorly determined"
+                )
+        if not wand["sd_mm"] <= sd_frac * wand["nominal_mm"]:
+            failed.append(
+                f"wand length SD {wand['sd_mm']:.3g} mm > {100 * sd_frac:.2g} % of "
+                f"{wand['nominal_mm']:.4g} mm"
+            )
+        if not failed:
+            break
+        reasons = failed
+        grade = "acceptable" if level == "good" else "poor"
+    return {"grade": grade, "reasons": reasons}
+
+
+def write_report_figure(
+    rig: Rig,
+    wand: FloatArray,
+    wand_residuals: FloatArray,
+    inliers: BoolArray,
+    report: dict[str, Any],
+    path: str | Path,
+) -> Path:
+    """Write the calibration's picture (PNG): coverage and residuals per camera, the rig
+    from above with the wand positions, and the histogram of wand length errors.
+
+    Parameters
+    ----------
+    rig, wand, wand_residuals, inliers, report
+        As given to and returned by :func:`quality_report`.
+    path : str or Path
+        Output file (``.png``).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    C = len(rig)
+    cols = min(C, 4)
+    rows = -(-C // cols) + 1
+    fig = Figure(figsize=(3.2 * cols, 2.7 * rows), layout="constrained")
+    norm_res = np.linalg.norm(wand_residuals, axis=-1)
+    vmax = float(np.nanpercentile(norm_res[inliers], 99)) if np.any(inliers) else 1.0
+    for c, cam in enumerate(rig):
+        ax = fig.add_subplot(rows, cols, c + 1)
+        uv = wand[:, c][inliers[:, c]]
+        sc = ax.scatter(
+            uv[:, 0],
+            uv[:, 1],
+            c=norm_res[:, c][inliers[:, c]],
+            s=1,
+            vmin=0,
+            vmax=vmax,
+            cmap="viridis",
+            rasterized=True,
+        )
+        bad = wand[:, c][~inliers[:, c] & np.all(np.isfinite(wand[:, c]), axis=-1)]
+        if len(bad):
+            ax.scatter(bad[:, 0], bad[:, 1], s=6, c="red", marker="x", label="rejected")
+        w, h = cam.size
+        ax.set_xlim(0, w)
+        ax.set_ylim(h, 0)
+        ax.set_aspect("equal")
+        stats = report["cameras"][c]
+        ax.set_title(
+            f"{cam.name}: {stats['reprojection_rms_px']:.3f} px, "
+            f"{100 * stats['image_coverage']:.0f} % covered",
+            fontsize=8,
+        )
+        ax.tick_params(labelsize=6)
+    fig.colorbar(sc, ax=fig.axes, shrink=0.6, label="residual (px)")
+    ax = fig.add_subplot(rows, 2, 2 * rows - 1)
+    centres = np.array([cam.center for cam in rig])
+    F = wand.shape[0]
+    X, _ = intersect(
+        list(rig),
+        np.where(inliers[..., None], wand, np.nan).transpose(1, 0, 2, 3).reshape(C, F * 2, 2),
+    )
+    ax.scatter(X[:, 0], X[:, 1], s=0.5, c="0.6", rasterized=True)
+    ax.scatter(centres[:, 0], centres[:, 1], marker="^", c="C3")
+    for cam, pos in zip(rig, centres, strict=True):
+        ax.annotate(cam.name, pos[:2], fontsize=7)
+    ax.set_aspect("equal")
+    ax.set_title("rig from above (mm)", fontsize=8)
+    ax = fig.add_subplot(rows, 2, 2 * rows)
+    lengths = wand_lengths(rig, wand, inliers)
+    nominal = report["wand"]["nominal_mm"]
+    ax.hist(lengths[np.isfinite(lengths)] - nominal, bins=50, color="C0")
+    ax.set_title(
+        f"wand length error (mm): SD {report['wand']['sd_mm']:.3f}, "
+        f"verdict {report['verdict']['grade']}",
+        fontsize=8,
+    )
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    return out

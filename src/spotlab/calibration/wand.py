@@ -1,0 +1,304 @@
+"""Wand self-calibration of a camera rig from a cold start (Woltring & Huiskes 1990, §5).
+
+``wand_calibrate`` needs no initial guess: the cold start (``_wand_init``) finds every
+camera's principal distance, orientation and position from the reference object and the
+wand alone; a bundle adjustment (``_wand_bundle``) then estimates all camera parameters
+(pose, principal distances, principal point, radial and tangential distortion) and all
+wand poses together, with the wand length fixed, the reference object fixing the world
+frame, Huber-robust weights and rejection of outlying observations.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.calibration._camera_block import BLOCK, INTRINSIC_NAMES, cameras_from_blocks
+from spotlab.calibration._rays import intersect
+from spotlab.calibration._wand_bundle import BundleProblem, BundleState, adjust, residuals
+from spotlab.calibration._wand_init import cold_start
+from spotlab.calibration.report import quality_report
+from spotlab.core.errors import CalibrationError
+from spotlab.geometry import Camera, Rig
+
+__all__ = ["WandCalibration", "wand_calibrate"]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Progress = Callable[[str], None]
+
+#: Frames used by the first, coarse adjustment stages.
+_COARSE_FRAMES = 400
+
+
+@dataclass(frozen=True)
+class WandCalibration:
+    """Result of :func:`wand_calibrate`.
+
+    Attributes
+    ----------
+    rig : Rig
+        The calibrated cameras, world frame of the reference object, mm.
+    report : dict
+        Quality figures (see :func:`spotlab.calibration.report.quality_report`) plus the
+        run's timings and stages.
+    wand_ends : ndarray, shape (F, 2, 3)
+        Adjusted wand ends (mm), NaN for frames not used.
+    wand_residuals : ndarray, shape (F, C, 2, 2)
+        Reprojection residuals (px), NaN where unseen, unused or rejected.
+    frame_residuals : ndarray, shape (C, P, 2)
+        Residuals of the reference object's markers (px).
+    inliers : ndarray of bool, shape (F, C, 2)
+        Wand observations kept after outlier rejection.
+    """
+
+    rig: Rig
+    report: dict[str, Any]
+    wand_ends: FloatArray
+    wand_residuals: FloatArray
+    frame_residuals: FloatArray
+    inliers: BoolArray = field(repr=False)
+
+
+def _sizes(image_size: Any, C: int) -> list[tuple[int, int]]:
+    arr = np.asarray(image_size)
+    if arr.shape == (2,):
+        arr = np.tile(arr, (C, 1))
+    if arr.shape != (C, 2) or not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise CalibrationError(
+            f"image_size must be (width, height) or one per camera ({C}, 2) of positive "
+            f"pixels, got {np.asarray(image_size).tolist()!r}"
+        )
+    return [(int(w), int(h)) for w, h in arr]
+
+
+def _check(
+    wand: Any, wand_length: Any, frame: Any, frame_points: Any
+) -> tuple[FloatArray, float, FloatArray, FloatArray]:
+    wand = np.asarray(wand, dtype=np.float64)
+    if wand.ndim != 4 or wand.shape[2:] != (2, 2):
+        raise CalibrationError(
+            f"wand must have shape (frames, cameras, 2 ends, 2), got {wand.shape}"
+        )
+    C = wand.shape[1]
+    if C < 2:
+        raise CalibrationError(f"a wand calibration needs >= 2 cameras, got {C}")
+    if np.any(np.isinf(wand)):
+        raise CalibrationError("wand contains infinite image coordinates")
+    length = float(wand_length)
+    if not np.isfinite(length) or length <= 0:
+        raise CalibrationError(f"wand_length must be a positive length in mm, got {wand_length}")
+    frame = np.asarray(frame, dtype=np.float64)
+    frame_points = np.asarray(frame_points, dtype=np.float64)
+    if frame_points.ndim != 2 or frame_points.shape[1] != 3:
+        raise CalibrationError(f"frame_points must have shape (P, 3), got {frame_points.shape}")
+    if not np.all(np.isfinite(frame_points)):
+        raise CalibrationError("frame_points contains NaN or infinite coordinates")
+    if frame.shape != (C, frame_points.shape[0], 2):
+        raise CalibrationError(
+            f"frame must have shape (cameras={C}, markers={frame_points.shape[0]}, 2), "
+            f"got {frame.shape}"
+        )
+    if np.any(np.isinf(frame)):
+        raise CalibrationError("frame contains infinite image coordinates")
+    seen = np.all(np.isfinite(wand), axis=-1)  # (F, C, 2)
+    blind = np.flatnonzero(~np.any(seen, axis=(0, 2)))
+    if blind.size:
+        raise CalibrationError(
+            f"camera(s) {', '.join(str(c + 1) for c in blind)} never see the wand"
+        )
+    pair = np.sum(np.all(seen, axis=2), axis=1) >= 2
+    if not np.any(pair):
+        raise CalibrationError("no frame in which two cameras see both wand ends")
+    if np.count_nonzero(pair) < 20:
+        raise CalibrationError(
+            f"only {np.count_nonzero(pair)} frames in which two cameras see both wand ends: "
+            "at least 20 are needed"
+        )
+    return wand, length, frame, frame_points
+
+
+def _sigma(r: FloatArray) -> float:
+    """Robust scale (px) of 2-D residuals: the median norm of a circular normal is 1.1774 sigma."""
+    norm = np.linalg.norm(r, axis=-1)
+    norm = norm[np.isfinite(norm)]
+    return float(np.median(norm) / 1.1774) if norm.size else np.nan
+
+
+def _retriangulate(
+    cameras: Sequence[Camera], wand: FloatArray
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Wand centres (F, 3), unit directions (F, 3) and usability (F,) from a rig."""
+    F = wand.shape[0]
+    X, _ = intersect(cameras, wand.transpose(1, 0, 2, 3).reshape(len(cameras), F * 2, 2))
+    ends = X.reshape(F, 2, 3)
+    d = ends[:, 1] - ends[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    usable = np.all(np.isfinite(ends), axis=(1, 2)) & np.all(np.isfinite(d), axis=1)
+    return 0.5 * (ends[:, 0] + ends[:, 1]), d, usable
+
+
+def _frame_weight(wand_res: FloatArray, frame_res: FloatArray) -> float:
+    """Relative weight of the reference object's residuals: the ratio of variances.
+
+    The reference object is static, so its image points are means of many samples and
+    far less noisy than a moving wand's; each residual set's variance is estimated from
+    the adjusted residuals (the reference's 6 pose degrees of freedom deducted), and the
+    ratio is kept within [1, 1e4].
+    """
+    fr = frame_res[np.all(np.isfinite(frame_res), axis=-1)]
+    n = fr.size
+    if n <= 12:
+        return 1.0
+    var_f = float(np.sum(fr * fr)) / (n - 6)
+    var_w = float(np.mean(wand_res * wand_res))
+    return float(np.clip(var_w / max(var_f, 1e-300), 1.0, 1e4))
+
+
+def _free_mask(C: int, stage: str, distortion: Sequence[str], principal_point: bool) -> BoolArray:
+    free = np.zeros((C, BLOCK), dtype=bool)
+    free[:, 0:8] = True  # rotation, translation, fx, fy
+    if stage == "full":
+        if principal_point:
+            free[:, 8:10] = True
+        for name in distortion:
+            free[:, 6 + INTRINSIC_NAMES.index(name)] = True
+    return free
+
+
+def wand_calibrate(
+    wand: Any,
+    wand_length: float,
+    frame: Any,
+    frame_points: Any,
+    image_size: Any,
+    *,
+    names: Sequence[str] | None = None,
+    distortion: Sequence[str] = ("k1", "k2", "p1", "p2", "k3"),
+    principal_point: bool = True,
+    outlier_sigma: float = 5.0,
+    progress: Progress | None = None,
+) -> WandCalibration:
+    """Calibrate a rig from a wand dance and a static reference object, no guess needed.
+
+    Parameters
+    ----------
+    wand : array_like, shape (F, C, 2, 2)
+        Image points (px) of both wand ends per frame and camera, NaN where unseen.
+    wand_length : float
+        Distance between the wand's two markers (mm).
+    frame : array_like, shape (C, P, 2)
+        Image points (px) of the static reference object (L-frame or triad), averaged
+        over its static recording, NaN where unseen.
+    frame_points : array_like, shape (P, 3)
+        The reference object's marker coordinates (mm), which define the world frame.
+    image_size : (width, height) or array_like, shape (C, 2)
+        Image size (px) of all cameras or of each.
+    names : sequence of str, optional
+        Camera names (default ``cam1`` ... ``camC``).
+    distortion : sequence of str
+        Distortion terms estimated, a subset of ``("k1", "k2", "p1", "p2", "k3")``;
+        the others stay zero.
+    principal_point : bool
+        Estimate the principal point (otherwise it stays at the image centre).
+    outlier_sigma : float
+        Observations whose residual exceeds this many robust standard deviations are
+        rejected before the final adjustment.
+    progress : callable, optional
+        Called with a short message at each stage.
+
+    Returns
+    -------
+    WandCalibration
+        ``.rig`` and ``.report`` (see :func:`spotlab.calibration.report.quality_report`).
+
+    Raises
+    ------
+    CalibrationError
+        Naming the cause: bad shapes, NaN in the reference coordinates, a camera that
+        never sees the wand, too few frames seen by two cameras, cameras that share one
+        position, a reference object not seen by two cameras, no convergence.
+    """
+    t0 = time.perf_counter()
+    say = progress or (lambda _msg: None)
+    wand, length, frame, frame_points = _check(wand, wand_length, frame, frame_points)
+    F, C = wand.shape[:2]
+    sizes = _sizes(image_size, C)
+    names = list(names) if names is not None else [f"cam{c + 1}" for c in range(C)]
+    if len(names) != C:
+        raise CalibrationError(f"{len(names)} names given for {C} cameras")
+    unknown = set(distortion) - set(INTRINSIC_NAMES[4:])
+    if unknown:
+        raise CalibrationError(f"unknown distortion term(s) {sorted(unknown)}")
+
+    say("cold start: principal distances, relative orientations, world frame")
+    init = cold_start(wand, length, frame, frame_points, sizes)
+    blocks = np.zeros((C, BLOCK))
+    blocks[:, 3:6] = init.translations
+    blocks[:, 6] = blocks[:, 7] = init.focal
+    blocks[:, 8:10] = init.principal_point
+    usable = np.flatnonzero(init.usable)
+    if usable.size < 20:
+        raise CalibrationError(
+            f"only {usable.size} wand frames could be triangulated from the initial rig"
+        )
+    timings = {"cold_start_s": time.perf_counter() - t0}
+
+    coarse = usable[np.linspace(0, usable.size - 1, min(_COARSE_FRAMES, usable.size)).astype(int)]
+    state = BundleState(
+        blocks, init.rotations.copy(), init.centres[coarse], init.directions[coarse]
+    )
+    stages: list[dict[str, Any]] = []
+    for stage in ("pose+focal", "full"):
+        say(f"adjusting {coarse.size} frames: {stage}")
+        free = _free_mask(C, stage, distortion, principal_point)
+        problem = BundleProblem(wand[coarse], length, frame, frame_points, free)
+        problem.huber_px = max(3.0 * _sigma(residuals(problem, state)[0]), 0.1)
+        state, log = adjust(problem, state, max_iterations=40)
+        stages.append({"stage": stage, "frames": int(coarse.size), **vars(log)})
+
+    cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
+    centres, directions, ok = _retriangulate(cameras, wand)
+    frames = np.flatnonzero(ok)
+    state = BundleState(state.blocks, state.rotations, centres[frames], directions[frames])
+    free = _free_mask(C, "full", distortion, principal_point)
+    problem = BundleProblem(wand[frames], length, frame, frame_points, free)
+    for stage in ("all frames", "outliers rejected"):
+        sigma = _sigma(residuals(problem, state)[0])
+        if stage == "outliers rejected":
+            r, fr = residuals(problem, state)
+            problem.use &= ~(np.linalg.norm(r, axis=-1) > outlier_sigma * sigma)
+            problem.frame_weight = _frame_weight(r[problem.use], fr)
+        problem.huber_px = max(3.0 * sigma, 1e-3)
+        say(f"adjusting {frames.size} frames: {stage}")
+        state, log = adjust(problem, state, max_iterations=50)
+        stages.append({"stage": stage, "frames": int(frames.size), **vars(log)})
+    timings["total_s"] = time.perf_counter() - t0
+
+    cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
+    rig = Rig(cameras)
+    r_wand, r_frame = residuals(problem, state)
+    wand_res = np.full((F, C, 2, 2), np.nan)
+    wand_res[frames] = r_wand
+    inliers = np.zeros((F, C, 2), dtype=bool)
+    inliers[frames] = problem.use
+    ends = np.full((F, 2, 3), np.nan)
+    ends[frames] = state.wand_ends(length)
+    report = quality_report(rig, wand, length, wand_res, r_frame, inliers)
+    report["stages"] = stages
+    report["timings"] = timings
+    report["cold_start_tree"] = [[p + 1, q + 1] for p, q in init.tree]
+    return WandCalibration(
+        rig=rig,
+        report=report,
+        wand_ends=ends,
+        wand_residuals=wand_res,
+        frame_residuals=r_frame,
+        inliers=inliers,
+    )
