@@ -1,0 +1,261 @@
+"""The triangulation estimators, vectorised over points: ODLE, DLT, midpoint, Gauss-Newton.
+
+Every function works in a world frame centred on the rig (``X' = X - origin``), takes
+per camera the viewing data of all N points (NaN or zero weight where a camera does not
+see a point) and returns centred points, shape (N, 3), with the conditioning of each
+point's normal equations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.geometry import Camera
+from spotlab.reconstruction._normal_equations import Normal3
+from spotlab.reconstruction._rays import brown, normalized_coordinates
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class Views:
+    """The observations of N points by C cameras, undistorted once.
+
+    Attributes
+    ----------
+    cameras : tuple of Camera
+    origin : ndarray, shape (3,)
+        World point (mm) the computations are centred on.
+    t : ndarray, shape (C, 3)
+        Camera translations in the centred frame (``t + R origin``).
+    x, y : ndarray, shape (C, N)
+        Ideal normalised coordinates, 0 where unseen.
+    seen : ndarray of bool, shape (C, N)
+    weights : ndarray, shape (C, N)
+        User weights, 0 where unseen.
+    """
+
+    cameras: tuple[Camera, ...]
+    origin: FloatArray
+    t: FloatArray
+    x: FloatArray
+    y: FloatArray
+    seen: NDArray[np.bool_]
+    weights: FloatArray
+
+    @classmethod
+    def build(
+        cls,
+        cameras: tuple[Camera, ...],
+        origin: FloatArray,
+        uv: FloatArray,
+        seen: NDArray[np.bool_],
+        w: FloatArray,
+    ) -> Views:
+        t = np.stack([cam.t + cam.R @ origin for cam in cameras])
+        x = np.zeros(seen.shape)
+        y = np.zeros(seen.shape)
+        for c, cam in enumerate(cameras):
+            xc, yc = normalized_coordinates(cam, uv[c, :, 0], uv[c, :, 1])
+            np.copyto(x[c], xc, where=seen[c])
+            np.copyto(y[c], yc, where=seen[c])
+        return cls(cameras, origin, t, x, y, seen, np.where(seen, w, 0.0))
+
+    def depth(self, c: int, X: FloatArray) -> FloatArray:
+        """Depth ``z_cam`` (mm) of centred points X (N, 3) in camera c."""
+        r = self.cameras[c].R[2]
+        return np.asarray(X @ r + self.t[c, 2])
+
+    def pixel_scale(self, c: int) -> float:
+        """Principal distance (px) that turns normalised distances into pixels."""
+        K = self.cameras[c].K
+        return float(np.sqrt(K[0, 0] * K[1, 1]))
+
+
+def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArray, FloatArray]:
+    """Woltring & Huiskes (1990) Eq. 6: the point nearest to all rays, weighted.
+
+    ``A = sum_j w_j (I - n_j n_j')``, ``b = sum_j w_j (I - n_j n_j') c_j``, ``X = A^-1 b``
+    with unit ray directions ``n_j`` and perspective centres ``c_j``. With
+    ``depth_weighted`` every pass after the first multiplies the user weights by
+    ``(f_j / z_j)^2`` from the previous estimate, so that each squared ray distance is
+    measured in pixels at the point's depth: the estimate then minimises (to first
+    order) the image error, the maximum-likelihood criterion for pixel noise.
+    """
+    C, N = views.seen.shape
+    rays = []
+    centres = []
+    for c, cam in enumerate(views.cameras):
+        R = cam.R
+        d = np.stack([R[0, k] * views.x[c] + R[1, k] * views.y[c] + R[2, k] for k in range(3)])
+        d *= 1.0 / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        rays.append(d)
+        centres.append(-R.T @ views.t[c])
+    X = np.zeros((N, 3))
+    conditioning = np.zeros(N)
+    passes = 1 + (iterations if depth_weighted else 0)
+    for k in range(passes):
+        normal = Normal3(N)
+        for c in range(C):
+            w = views.weights[c]
+            if k > 0:
+                z = views.depth(c, X)
+                w = w * (views.pixel_scale(c) / z) ** 2
+            _add_ray(normal, rays[c], centres[c], w)
+        X, conditioning = normal.solve()
+    return X, conditioning
+
+
+def _add_ray(normal: Normal3, n: FloatArray, centre: FloatArray, w: FloatArray) -> None:
+    """Add ``w (I - n n')`` to A and ``w (I - n n') c`` to b, n of shape (3, N)."""
+    wn = w * n
+    a = normal.a
+    a[0] += w - wn[0] * n[0]
+    a[1] -= wn[0] * n[1]
+    a[2] -= wn[0] * n[2]
+    a[3] += w - wn[1] * n[1]
+    a[4] -= wn[1] * n[2]
+    a[5] += w - wn[2] * n[2]
+    nc = n[0] * centre[0] + n[1] * centre[1] + n[2] * centre[2]
+    for k in range(3):
+        normal.b[k] += w * centre[k] - wn[k] * nc
+
+
+def _add_rows(
+    normal: Normal3,
+    g1: FloatArray,
+    g2: FloatArray,
+    e1: FloatArray,
+    e2: FloatArray,
+) -> None:
+    """Add the row pair ``g1' X = e1``, ``g2' X = e2`` (g of shape (3, N)) to the normal
+    equations."""
+    a = normal.a
+    for i, (r, s) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        a[i] += g1[r] * g1[s] + g2[r] * g2[s]
+    for k in range(3):
+        normal.b[k] += g1[k] * e1 + g2[k] * e2
+
+
+def _pixel_rows(
+    views: Views, c: int, scale: FloatArray | float
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """DLT rows of camera c in pixels, divided by ``scale`` (the projective depth).
+
+    In normalised coordinates ``(x r3 - r1)' X = t1 - x t3`` and
+    ``(y r3 - r2)' X = t2 - y t3`` (Woltring & Huiskes 1990, Eq. 4 multiplied by its
+    denominator); mapped by the 2x2 pixel part of K their residuals are ``z`` times the
+    (ideal) pixel residuals.
+    """
+    cam = views.cameras[c]
+    R, t, K = cam.R, views.t[c], cam.K
+    x, y = views.x[c], views.y[c]
+    rx = np.outer(R[2], x) - R[0][:, None]
+    ry = np.outer(R[2], y) - R[1][:, None]
+    ex = t[0] - x * t[2]
+    ey = t[1] - y * t[2]
+    s = np.sqrt(views.weights[c]) / scale
+    g1 = (K[0, 0] * rx + K[0, 1] * ry) * s
+    e1 = (K[0, 0] * ex + K[0, 1] * ey) * s
+    return g1, (K[1, 1] * s) * ry, e1, (K[1, 1] * s) * ey
+
+
+def dlt(views: Views, iterations: int) -> tuple[FloatArray, FloatArray]:
+    """Woltring & Huiskes (1990) Eq. 7-8 with iterative re-weighting.
+
+    The first pass is the plain least-squares solution of the DLT equations (each
+    camera's rows divided by its ``L12`` normalisation, the depth of the world origin
+    ``t_z``, as DLTdv and the textbook DLT have them; by the depth of the rig centre if
+    the world origin lies in a camera's principal plane). Each further pass divides the
+    rows by the projective depth of the previous estimate, which makes every residual a
+    pixel residual and removes the bias of the unweighted solution (Woltring & Huiskes
+    1990, p. 204: "two or three iterations are usually sufficient").
+    """
+    N = views.seen.shape[1]
+    X = np.zeros((N, 3))
+    conditioning = np.zeros(N)
+    for k in range(1 + iterations):
+        normal = Normal3(N)
+        for c, cam in enumerate(views.cameras):
+            if k == 0:
+                tz = float(cam.t[2])
+                ok = abs(tz) > 1e-9 * float(np.linalg.norm(cam.t))
+                scale: FloatArray | float = abs(tz) if ok else abs(float(views.t[c, 2]))
+            else:
+                scale = views.depth(c, X)
+            _add_rows(normal, *_pixel_rows(views, c, scale))
+        X, conditioning = normal.solve()
+    return X, conditioning
+
+
+def midpoint(views: Views) -> FloatArray:
+    """Yeadon (1990) Fig. 4: midpoint of the common perpendicular of two rays per point.
+
+    ``P = c1 + s d1`` and ``Q = c2 + u d2`` with ``(P - Q)`` normal to both rays:
+    ``s = (b e - c d) / (a c - b^2)``, ``u = (a e - b d) / (a c - b^2)`` where
+    ``a = d1'd1, b = d1'd2, c = d2'd2, d = d1'w, e = d2'w, w = c1 - c2``. Each point
+    must be seen by exactly two cameras (checked by the caller).
+    """
+    N = views.seen.shape[1]
+    order = np.argsort(~views.seen, axis=0, kind="stable")[:2]  # the two seeing cameras
+    cols = np.arange(N)
+    ends = []
+    for slot in range(2):
+        cam_index = order[slot]
+        R = np.stack([cam.R for cam in views.cameras])[cam_index]  # (N, 3, 3)
+        ray = np.stack([views.x[cam_index, cols], views.y[cam_index, cols], np.ones(N)], 1)
+        d = np.einsum("nji,nj->ni", R, ray)
+        centre = -np.einsum("nji,nj->ni", R, views.t[cam_index])
+        ends.append((centre, d))
+    (c1, d1), (c2, d2) = ends
+    w = c1 - c2
+    a = np.sum(d1 * d1, 1)
+    b = np.sum(d1 * d2, 1)
+    c = np.sum(d2 * d2, 1)
+    d = np.sum(d1 * w, 1)
+    e = np.sum(d2 * w, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = a * c - b * b
+        s = (b * e - c * d) / den
+        u = (a * e - b * d) / den
+    return np.asarray(0.5 * (c1 + s[:, None] * d1 + c2 + u[:, None] * d2))
+
+
+def refine(
+    views: Views, uv: FloatArray, X: FloatArray, iterations: int
+) -> tuple[FloatArray, FloatArray]:
+    """Gauss-Newton on the weighted reprojection error in distorted pixels.
+
+    Per camera the Jacobian of the projection is ``-(M / z) [x r3 - r1; y r3 - r2]``
+    with ``M`` the pixel part of K times the Brown Jacobian: the same rows as the DLT,
+    so the same normal equations serve.
+    """
+    N = views.seen.shape[1]
+    conditioning = np.zeros(N)
+    for _ in range(iterations):
+        normal = Normal3(N)
+        for c, cam in enumerate(views.cameras):
+            R, t, K = cam.R, views.t[c], cam.K
+            xc = X @ R.T + t
+            z = xc[:, 2]
+            x, y = xc[:, 0] / z, xc[:, 1] / z
+            xd, yd, j00, j01, j11 = brown(x, y, cam.dist)
+            u = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]
+            v = K[1, 1] * yd + K[1, 2]
+            s = np.sqrt(views.weights[c]) / z
+            seen = views.seen[c]
+            r1 = np.where(seen, uv[c, :, 0] - u, 0.0) * np.sqrt(views.weights[c])
+            r2 = np.where(seen, uv[c, :, 1] - v, 0.0) * np.sqrt(views.weights[c])
+            m00 = (K[0, 0] * j00 + K[0, 1] * j01) * s
+            m01 = (K[0, 0] * j01 + K[0, 1] * j11) * s
+            m10 = K[1, 1] * j01 * s
+            m11 = K[1, 1] * j11 * s
+            rx = R[0][:, None] - np.outer(R[2], x)
+            ry = R[1][:, None] - np.outer(R[2], y)
+            _add_rows(normal, m00 * rx + m01 * ry, m10 * rx + m11 * ry, r1, r2)
+        step, conditioning = normal.solve()
+        X = X + step
+    return X, conditioning

@@ -1,0 +1,309 @@
+"""Triangulation of image points seen by several calibrated cameras.
+
+``triangulate(rig, uv)`` returns the 3-D points; ``triangulate_points`` the same with
+residuals per ray and per point, the number of views, conditioning and outlier flags.
+The estimators (Woltring & Huiskes 1990, Eq. 6-8; Yeadon 1990, Fig. 4) are in
+:mod:`spotlab.reconstruction._solvers`; the equations are in ``docs/reconstruction.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.core.errors import ReconstructionError
+from spotlab.geometry import Rig
+from spotlab.reconstruction import _solvers
+
+__all__ = ["METHODS", "TriangulationResult", "triangulate", "triangulate_points"]
+
+FloatArray = NDArray[np.float64]
+Method = Literal["odle", "dlt", "midpoint"]
+
+#: The estimators :func:`triangulate` knows.
+METHODS: tuple[str, ...] = ("odle", "dlt", "midpoint")
+
+_BLOCK = 1 << 14  # points per block
+
+
+@dataclass(frozen=True)
+class TriangulationResult:
+    """Outcome of :func:`triangulate_points`; ``...`` is the point shape of ``uv``.
+
+    Attributes
+    ----------
+    points : ndarray, shape (..., 3)
+        World points (mm); NaN where fewer than two cameras see a point or its rays are
+        (nearly) parallel.
+    residuals : ndarray, shape (C, ..., 2)
+        Observed minus reprojected pixel coordinates per ray (px), NaN where unseen.
+    ray_error : ndarray, shape (C, ..., )
+        Length of each ray's residual (px), NaN where unseen.
+    rms : ndarray, shape (...)
+        Root mean square of a point's ray errors (px).
+    n_views : ndarray of int, shape (...)
+        Cameras that see each point.
+    conditioning : ndarray, shape (...)
+        Reciprocal condition number (within a factor of 3) of a point's normal
+        equations: about ``theta^2 / 4`` for two rays meeting at angle ``theta``; 0 for
+        parallel rays.
+    ill_conditioned : ndarray of bool, shape (...)
+        Points whose ``conditioning`` is below ``min_conditioning`` (set to NaN).
+    outlier : ndarray of bool, shape (...)
+        Points with a ray error above ``outlier_px``.
+    """
+
+    points: FloatArray
+    residuals: FloatArray
+    ray_error: FloatArray
+    rms: FloatArray
+    n_views: NDArray[np.intp]
+    conditioning: FloatArray
+    ill_conditioned: NDArray[np.bool_]
+    outlier: NDArray[np.bool_]
+
+
+def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray]:
+    if not isinstance(rig, Rig):
+        raise ReconstructionError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
+    try:
+        arr = np.asarray(uv, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ReconstructionError(f"uv must be numeric: {exc}") from None
+    C = len(rig)
+    if arr.ndim < 2 or arr.shape[-1] != 2:
+        raise ReconstructionError(f"uv must have shape (C, ..., 2), got {arr.shape}")
+    if arr.shape[0] != C:
+        raise ReconstructionError(
+            f"uv holds observations of {arr.shape[0]} cameras but the rig has {C}"
+        )
+    if np.isinf(arr).any():
+        raise ReconstructionError("uv holds infinite values: mark unseen points with NaN")
+    if weights is None:
+        w = np.ones(arr.shape[:-1])
+    else:
+        try:
+            w = np.broadcast_to(np.asarray(weights, dtype=np.float64), arr.shape[:-1])
+        except ValueError:
+            raise ReconstructionError(
+                f"weights of shape {np.shape(weights)} do not broadcast to the rays "
+                f"{arr.shape[:-1]} (C, ...)"
+            ) from None
+        seen = np.all(np.isfinite(arr), axis=-1)
+        if not np.all(np.isfinite(w[seen]) & (w[seen] >= 0.0)):
+            raise ReconstructionError("weights must be finite and >= 0 for every seen ray")
+    return rig, arr, w
+
+
+def triangulate_points(
+    rig: Rig,
+    uv: Any,
+    method: Method = "odle",
+    *,
+    weights: Any = None,
+    iterations: int | None = None,
+    refine: int = 0,
+    strict: bool = False,
+    min_conditioning: float = 1e-8,
+    outlier_px: float = 3.0,
+) -> TriangulationResult:
+    """Triangulate points and report residuals, views, conditioning and outliers.
+
+    Parameters
+    ----------
+    rig : Rig
+        The calibrated cameras (mm).
+    uv : array_like, shape (C, ..., 2)
+        Observed (distorted) pixel coordinates per camera: (C, N, 2) for N points, or
+        (C, F, M, 2) for F frames of M markers; NaN where a camera does not see a point.
+    method : {"odle", "dlt", "midpoint"}
+        ``"odle"``: the point nearest to all rays in the weighted least-squares sense
+        (Woltring & Huiskes 1990, Eq. 6). ``"dlt"``: least squares on the DLT equations
+        (Eq. 7-8) with iterative re-weighting by the projective depth. ``"midpoint"``:
+        midpoint of the common perpendicular of two rays (Yeadon 1990); every point
+        must be seen by exactly two cameras.
+    weights : array_like, shape broadcastable to (C, ...), optional
+        Per-ray weights >= 0 (for example inverse variances). For ``"odle"`` the
+        default (None) weighs each ray by ``(f / z)^2`` from a first unweighted pass,
+        so that ray distances count in pixels; given weights multiply that factor.
+        ``weights`` is ignored by ``"midpoint"``.
+    iterations : int, optional
+        Re-weighting passes after the first solution: ``"odle"`` 1, ``"dlt"`` 2 by
+        default. ``iterations=0`` gives the plain Eq. 6 (unweighted ODLE) or Eq. 8 (the
+        DLTdv solution).
+    refine : int
+        Gauss-Newton steps on the reprojection error in distorted pixels after the
+        chosen method (0: none). Two steps reach the maximum-likelihood estimate to
+        well below the noise.
+    strict : bool
+        Raise instead of returning NaN for points seen by fewer than two cameras or
+        with parallel rays.
+    min_conditioning : float
+        Points whose normal equations have a reciprocal condition number below this
+        (rays closer than about ``2 sqrt(min_conditioning)`` rad to parallel) are
+        set to NaN and flagged.
+    outlier_px : float
+        A point is flagged as an outlier when one of its rays misses it by more than
+        this (px).
+
+    Returns
+    -------
+    TriangulationResult
+
+    Raises
+    ------
+    ReconstructionError
+        For ``uv`` of the wrong shape, a camera count that differs from the rig's,
+        infinite coordinates, invalid weights, an unknown method, ``"midpoint"`` with
+        other than two views of a point, pixels where the distortion has no inverse,
+        or (with ``strict``) points that cannot be reconstructed.
+    """
+    X, uv_flat, shape, extra = _triangulate(
+        rig, uv, method, weights, iterations, refine, strict, min_conditioning
+    )
+    C = len(rig)
+    projected = np.stack([cam.project(X) for cam in rig])
+    residuals = uv_flat - projected
+    ray_error = np.hypot(residuals[..., 0], residuals[..., 1])
+    n_views, conditioning, ill = extra
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(np.nansum(ray_error**2, axis=0) / n_views)
+    rms[~np.isfinite(X[:, 0])] = np.nan
+    outlier = np.nanmax(np.where(np.isfinite(ray_error), ray_error, -1.0), axis=0) > outlier_px
+    return TriangulationResult(
+        points=X.reshape(*shape, 3),
+        residuals=residuals.reshape(C, *shape, 2),
+        ray_error=ray_error.reshape(C, *shape),
+        rms=rms.reshape(shape),
+        n_views=n_views.reshape(shape),
+        conditioning=conditioning.reshape(shape),
+        ill_conditioned=ill.reshape(shape),
+        outlier=outlier.reshape(shape),
+    )
+
+
+def triangulate(
+    rig: Rig,
+    uv: Any,
+    method: Method = "odle",
+    *,
+    weights: Any = None,
+    iterations: int | None = None,
+    refine: int = 0,
+    strict: bool = False,
+    min_conditioning: float = 1e-8,
+) -> FloatArray:
+    """World points from their images in several calibrated cameras.
+
+    Parameters
+    ----------
+    rig, uv, method, weights, iterations, refine, strict, min_conditioning
+        As in :func:`triangulate_points`.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        World points (mm); NaN where fewer than two cameras see a point or its rays
+        are (nearly) parallel.
+
+    Raises
+    ------
+    ReconstructionError
+        See :func:`triangulate_points`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from spotlab.reconstruction import triangulate
+    >>> from spotlab.simulators.rigs import ring_rig
+    >>> rig = ring_rig(4)
+    >>> X = np.array([[0.0, 0.0, 1000.0], [250.0, -100.0, 500.0]])
+    >>> uv = rig.project(X)
+    >>> uv[1:, 1] = np.nan  # the second point is seen by the first camera only
+    >>> np.round(triangulate(rig, uv), 6)
+    array([[   0.,    0., 1000.],
+           [  nan,   nan,   nan]])
+    """
+    X, _, shape, _ = _triangulate(
+        rig, uv, method, weights, iterations, refine, strict, min_conditioning
+    )
+    return X.reshape(*shape, 3)
+
+
+def _triangulate(
+    rig: Rig,
+    uv: Any,
+    method: str,
+    weights: Any,
+    iterations: int | None,
+    refine: int,
+    strict: bool,
+    min_conditioning: float,
+) -> tuple[FloatArray, FloatArray, tuple[int, ...], tuple[Any, FloatArray, Any]]:
+    if method not in METHODS:
+        raise ReconstructionError(f"unknown triangulation method {method!r}: choose from {METHODS}")
+    if iterations is not None and iterations < 0:
+        raise ReconstructionError(f"iterations must be >= 0, got {iterations}")
+    if refine < 0:
+        raise ReconstructionError(f"refine must be >= 0, got {refine}")
+    rig, arr, w = _check(rig, uv, weights)
+    C = len(rig)
+    shape = arr.shape[1:-1]
+    flat = arr.reshape(C, -1, 2)
+    seen = np.all(np.isfinite(flat), axis=-1)
+    n_views = seen.sum(axis=0)
+    few = n_views < 2
+    if strict and few.any():
+        raise ReconstructionError(
+            f"{int(few.sum())} of {few.size} points are seen by fewer than two cameras"
+        )
+    if method == "midpoint":
+        many = n_views > 2
+        if many.any():
+            raise ReconstructionError(
+                f"the midpoint method takes exactly two views per point; {int(many.sum())} "
+                f"points are seen by up to {int(n_views.max())} cameras (use 'odle' or 'dlt')"
+            )
+    w = w.reshape(C, -1)
+    N = flat.shape[1]
+    X = np.empty((N, 3))
+    conditioning = np.empty(N)
+    origin = np.mean([cam.center for cam in rig], axis=0)
+    # Blocks of points small enough for the temporaries to stay in the CPU cache.
+    for start in range(0, N, _BLOCK):
+        block = slice(start, start + _BLOCK)
+        views = _solvers.Views.build(
+            rig.cameras, origin, flat[:, block], seen[:, block], w[:, block]
+        )
+        with np.errstate(divide="ignore", invalid="ignore"):  # unseen points: masked below
+            X[block], conditioning[block] = _estimate(
+                views, flat[:, block], method, iterations, refine
+            )
+    ill = ~few & ~(conditioning >= min_conditioning)
+    if strict and ill.any():
+        raise ReconstructionError(
+            f"{int(ill.sum())} points have (nearly) parallel rays: reciprocal condition "
+            f"number below {min_conditioning:g}"
+        )
+    X[few | ill] = np.nan
+    X += origin
+    return X, flat, shape, (n_views, conditioning, ill)
+
+
+def _estimate(
+    views: _solvers.Views, flat: FloatArray, method: str, iterations: int | None, refine: int
+) -> tuple[FloatArray, FloatArray]:
+    """Centred points (N, 3) and their conditioning by the chosen method."""
+    if method == "odle":
+        X, conditioning = _solvers.odle(views, 1 if iterations is None else iterations, True)
+    elif method == "dlt":
+        X, conditioning = _solvers.dlt(views, 2 if iterations is None else iterations)
+    else:
+        X = _solvers.midpoint(views)
+        _, conditioning = _solvers.odle(views, 0, False)
+    if refine:
+        X, _ = _solvers.refine(views, flat, X, refine)
+    return X, conditioning
