@@ -187,6 +187,54 @@ def _residuals(
     return res
 
 
+def _normal_equations(
+    state: BundleState,
+    model: FloatArray,
+    res: FloatArray,
+    seen: BoolArray,
+    free: NDArray[np.intp],
+    pose_free: BoolArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Blocks of J'J and J'r: cameras U (C, n, n), poses V (V, 6, 6), W (C, V, n, 6)."""
+    _, _, J_cam_full, J_pose_full = _project(state, model, with_jacobian=True)
+    assert J_cam_full is not None and J_pose_full is not None
+    J_cam = J_cam_full[..., free] * seen[..., None, None]
+    J_pose = J_pose_full * (seen & pose_free[None, :, None])[..., None, None]
+    U = np.einsum("cvpia,cvpib->cab", J_cam, J_cam)
+    V = np.einsum("cvpia,cvpib->vab", J_pose, J_pose)
+    V[~pose_free] = np.eye(6)
+    W = np.einsum("cvpia,cvpib->cvab", J_cam, J_pose)
+    g_cam = np.einsum("cvpia,cvpi->ca", J_cam, res)
+    g_pose = np.einsum("cvpia,cvpi->va", J_pose, res)
+    return U, V, W, g_cam, g_pose
+
+
+def _reduced(
+    U: FloatArray, V: FloatArray, W: FloatArray, lam: float
+) -> tuple[FloatArray, FloatArray]:
+    """Damped Schur complement ``U - W V^-1 W'`` (C n, C n) and the damped ``V^-1``."""
+    n_cam, n_free = U.shape[:2]
+    Ud = U + lam * np.einsum("cii->ci", U)[..., None] * np.eye(n_free)
+    Vd = V + lam * np.einsum("vii->vi", V)[..., None] * np.eye(6)
+    Vinv = np.linalg.inv(Vd)
+    S = -np.einsum("cvab,vbd,evfd->caef", W, Vinv, W)
+    S[np.arange(n_cam), :, np.arange(n_cam), :] += Ud
+    return S.reshape(n_cam * n_free, n_cam * n_free), Vinv
+
+
+def _inverse_diagonal(S: FloatArray) -> FloatArray:
+    """Diagonal of ``S^-1`` for a symmetric positive semi-definite ``S``.
+
+    Directions the data do not determine (eigenvalues below 1e-15 of the largest after
+    Jacobi scaling) count with that floor: their variances come out huge, not zero as a
+    pseudo-inverse would make them.
+    """
+    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
+    evals, evecs = np.linalg.eigh(S / np.outer(d, d))
+    evals = np.maximum(evals, 1e-15 * max(float(evals[-1]), 1e-300))
+    return np.asarray(np.einsum("ij,j,ij->i", evecs, 1.0 / evals, evecs) / d**2)
+
+
 def adjust(
     state: BundleState,
     model: FloatArray,
@@ -224,13 +272,13 @@ def adjust(
     Raises
     ------
     CalibrationError
-        When the adjustment diverges or the start puts observed points behind a camera.
+        When the start puts observed points behind a camera. (A trial step that does
+        so is refused; the adjustment stops when no step lowers the cost.)
     """
     seen = np.all(np.isfinite(observations), axis=-1)
     obs = np.where(seen[..., None], observations, 0.0)
     free = np.flatnonzero(camera_free)
     n_cam, n_free = state.intrinsics.shape[0], free.size
-    w_pose = seen.astype(np.float64) * pose_free[None, :, None]
     res = _residuals(state, model, obs, seen)
     cost = float(np.sum(res**2))
     if not np.isfinite(cost):
@@ -238,25 +286,10 @@ def adjust(
             "bundle adjustment: observed points lie behind a camera at the start"
         )
     lam, iterations = 1e-3, 0
-    S = np.eye(n_cam * n_free)
     for iterations in range(1, max_iter + 1):  # noqa: B007
-        _, _, J_cam_full, J_pose = _project(state, model, with_jacobian=True)
-        assert J_cam_full is not None and J_pose is not None
-        J_cam = J_cam_full[..., free] * seen[..., None, None]
-        J_pose = J_pose * w_pose[..., None, None]
-        U = np.einsum("cvpia,cvpib->cab", J_cam, J_cam)
-        V = np.einsum("cvpia,cvpib->vab", J_pose, J_pose)
-        W = np.einsum("cvpia,cvpib->cvab", J_cam, J_pose)
-        g_cam = np.einsum("cvpia,cvpi->ca", J_cam, res)
-        g_pose = np.einsum("cvpia,cvpi->va", J_pose, res)
-        V[~pose_free] = np.eye(6)
+        U, V, W, g_cam, g_pose = _normal_equations(state, model, res, seen, free, pose_free)
         while True:
-            Ud = U + lam * np.einsum("cii->ci", U)[..., None] * np.eye(n_free)
-            Vd = V + lam * np.einsum("vii->vi", V)[..., None] * np.eye(6)
-            Vinv = np.linalg.inv(Vd)
-            S = -np.einsum("cvab,vbd,evfd->caef", W, Vinv, W)
-            S[np.arange(n_cam), :, np.arange(n_cam), :] += Ud
-            S = S.reshape(n_cam * n_free, n_cam * n_free)
+            S, Vinv = _reduced(U, V, W, lam)
             rhs = (g_cam - np.einsum("cvab,vbd,vd->ca", W, Vinv, g_pose)).ravel()
             scale = 1.0 / np.sqrt(np.maximum(np.diag(S), 1e-300))
             try:
@@ -283,23 +316,13 @@ def adjust(
         lam = max(lam / 10.0, 1e-12)
         if improvement < tol:
             break
-    # Undamped reduced normal matrix: covariance of the camera parameters.
     n_obs = 2 * int(np.count_nonzero(seen))
     n_par = n_cam * n_free + 6 * int(np.count_nonzero(pose_free))
     sigma2 = cost / max(n_obs - n_par, 1)
-    _, _, J_cam_full, J_pose = _project(state, model, with_jacobian=True)
-    assert J_cam_full is not None and J_pose is not None
-    J_cam = J_cam_full[..., free] * seen[..., None, None]
-    J_pose = J_pose * w_pose[..., None, None]
-    V = np.einsum("cvpia,cvpib->vab", J_pose, J_pose)
-    V[~pose_free] = np.eye(6)
-    W = np.einsum("cvpia,cvpib->cvab", J_cam, J_pose)
-    S = -np.einsum("cvab,vbd,evfd->caef", W, np.linalg.pinv(V), W)
-    S[np.arange(n_cam), :, np.arange(n_cam), :] += np.einsum("cvpia,cvpib->cab", J_cam, J_cam)
-    S = S.reshape(n_cam * n_free, n_cam * n_free)
+    U, V, W, _, _ = _normal_equations(state, model, res, seen, free, pose_free)
+    S, _ = _reduced(U, V, W, 0.0)
     std = np.full((n_cam, 16), np.nan)
-    with np.errstate(invalid="ignore"):
-        std[:, free] = np.sqrt(sigma2 * np.diag(np.linalg.pinv(S))).reshape(n_cam, n_free)
+    std[:, free] = np.sqrt(sigma2 * _inverse_diagonal(S)).reshape(n_cam, n_free)
     uv, _, _, _ = _project(state, model, with_jacobian=False)
     residuals = np.where(seen[..., None], observations - uv, np.nan)
     return BundleResult(state, residuals, std, iterations)

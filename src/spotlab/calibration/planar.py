@@ -27,6 +27,8 @@ BoolArray = NDArray[np.bool_]
 
 #: Fewest grid points per view: a homography has 8 degrees of freedom.
 MIN_POINTS = 4
+#: Largest standard error of fx, fy, cx or cy accepted, as a fraction of the focal length.
+MAX_RELATIVE_STD = 0.05
 
 
 @dataclass(frozen=True)
@@ -282,6 +284,38 @@ def view_points(image_points: Any, n_points: int, what: str = "image_points") ->
     return uv
 
 
+def check_determined(std: FloatArray, K: FloatArray, what: str = "") -> None:
+    """Refuse intrinsics the data leave undetermined.
+
+    Parameters
+    ----------
+    std : ndarray, shape (16,)
+        Standard errors of a bundle camera block (``fx, fy, cx, cy`` first; px).
+    K : ndarray, shape (3, 3)
+        The estimated intrinsics.
+    what : str
+        Prefix of the message (which camera).
+
+    Raises
+    ------
+    CalibrationError
+        When a standard error of ``fx, fy, cx, cy`` exceeds :data:`MAX_RELATIVE_STD` of
+        the focal length: noisy views of (nearly) parallel grid planes, or planes that
+        all turn about one axis, give a minimum but no answer.
+    """
+    focal = 0.5 * (K[0, 0] + K[1, 1])
+    rel = std[:4] / focal
+    worst = int(np.argmax(np.where(np.isnan(rel), -np.inf, rel)))
+    if rel[worst] > MAX_RELATIVE_STD:
+        name = ("fx", "fy", "cx", "cy")[worst]
+        raise CalibrationError(
+            f"{what}the views do not determine the intrinsics: the standard error of {name} "
+            f"is {std[worst]:.3g} px ({100 * rel[worst]:.0f} % of the focal length); the "
+            "grid planes are (nearly) parallel or all turn about one axis: tilt the grid "
+            "about different axes between views"
+        )
+
+
 def calibrate_intrinsics(
     object_points: Any,
     image_points: Any,
@@ -324,7 +358,9 @@ def calibrate_intrinsics(
     CalibrationError
         Too few views (3, or 2 without skew), a view with fewer than 4 points or
         collinear points, a grid that is not planar or is collinear, NaN in the grid,
-        grid planes all parallel to each other, or an adjustment that fails.
+        grid planes all parallel to each other, or intrinsics the views leave
+        undetermined (a standard error of ``fx, fy, cx, cy`` above 5 % of the focal
+        length).
 
     Notes
     -----
@@ -381,6 +417,7 @@ def calibrate_intrinsics(
     )
     p = result.state.intrinsics[0]
     K = np.array([[p[0], p[4], p[2]], [0.0, p[1], p[3]], [0.0, 0.0, 1.0]])
+    check_determined(result.camera_std[0], K)
     Rs, ts = result.state.pose_R, result.state.pose_t
     camera = Camera(K, p[5:], Rs[0], ts[0], size, name)
     residuals = result.residuals[0]

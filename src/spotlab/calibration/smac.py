@@ -20,6 +20,7 @@ from spotlab.calibration.planar import (
     PlanarCalibration,
     calibrate_intrinsics,
     camera_mask,
+    check_determined,
     check_grid,
     usable_views,
     view_points,
@@ -248,6 +249,8 @@ def smac_calibrate(
         max_iter=max_iter,
     )
     st = result.state
+    for c, cal in enumerate(own):
+        check_determined(result.camera_std[c], cal.camera.K, f"camera {cam_names[c]}: ")
     cameras = [
         Camera(
             [[p[0], p[4], p[2]], [0.0, p[1], p[3]], [0.0, 0.0, 1.0]],
