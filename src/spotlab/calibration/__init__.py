@@ -1,5 +1,6 @@
 """Calibration of cameras and rigs (DLT, SMAC, wand self-calibration); numpy and scipy only."""
 
+from spotlab.calibration.cage import CageCalibration, RotationCheck, cage_calibrate, rotation_check
 from spotlab.calibration.dlt import (
     DISTORTION_TERMS,
     DltResult,
@@ -16,12 +17,15 @@ from spotlab.calibration.wand import WandCalibration, wand_calibrate
 
 __all__ = [
     "DISTORTION_TERMS",
+    "CageCalibration",
     "DetectorLinearisation",
     "DltResult",
     "IacResult",
     "PlanarCalibration",
+    "RotationCheck",
     "SmacCalibration",
     "WandCalibration",
+    "cage_calibrate",
     "calibrate_intrinsics",
     "dlt_calibrate",
     "dlt_reconstruct_on_plane",
@@ -29,6 +33,7 @@ __all__ = [
     "fit_linearisation",
     "intrinsics_from_orthogonal_vanishing_points",
     "quality_report",
+    "rotation_check",
     "smac_calibrate",
     "vanishing_point",
     "wand_calibrate",
