@@ -56,12 +56,12 @@ class Views:
         w: FloatArray,
     ) -> Views:
         t = np.stack([cam.t + cam.R @ origin for cam in cameras])
-        x = np.zeros(seen.shape)
-        y = np.zeros(seen.shape)
+        x = np.empty(seen.shape)
+        y = np.empty(seen.shape)
         for c, cam in enumerate(cameras):
-            xc, yc = normalized_coordinates(cam, uv[c, :, 0], uv[c, :, 1])
-            np.copyto(x[c], xc, where=seen[c])
-            np.copyto(y[c], yc, where=seen[c])
+            x[c], y[c] = normalized_coordinates(cam, uv[c, :, 0], uv[c, :, 1])
+        np.nan_to_num(x, copy=False, nan=0.0)
+        np.nan_to_num(y, copy=False, nan=0.0)
         return cls(cameras, origin, t, x, y, seen, np.where(seen, w, 0.0))
 
     def depth(self, c: int, X: FloatArray) -> FloatArray:
@@ -86,42 +86,45 @@ def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArra
     order) the image error, the maximum-likelihood criterion for pixel noise.
     """
     C, N = views.seen.shape
-    rays = []
-    centres = []
+    # Per ray the 6 entries of (I - n n') and the 3 of (I - n n') c, computed once.
+    P = np.empty((C, 9, N))
     for c, cam in enumerate(views.cameras):
         R = cam.R
-        d = np.stack([R[0, k] * views.x[c] + R[1, k] * views.y[c] + R[2, k] for k in range(3)])
-        d *= 1.0 / np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        rays.append(d)
-        centres.append(-R.T @ views.t[c])
-    X = np.zeros((N, 3))
-    conditioning = np.zeros(N)
-    passes = 1 + (iterations if depth_weighted else 0)
-    for k in range(passes):
-        normal = Normal3(N)
-        for c in range(C):
-            w = views.weights[c]
-            if k > 0:
-                z = views.depth(c, X)
-                w = w * (views.pixel_scale(c) / z) ** 2
-            _add_ray(normal, rays[c], centres[c], w)
-        X, conditioning = normal.solve()
+        n = np.stack([R[0, k] * views.x[c] + R[1, k] * views.y[c] + R[2, k] for k in range(3)])
+        n *= 1.0 / np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        centre = -R.T @ views.t[c]
+        p = P[c]
+        for i, (r, s) in enumerate(_PAIRS):
+            np.multiply(n[r], n[s], out=p[i])
+            if r == s:
+                np.subtract(1.0, p[i], out=p[i])
+            else:
+                np.negative(p[i], out=p[i])
+        nc = n[0] * centre[0] + n[1] * centre[1] + n[2] * centre[2]
+        for k in range(3):
+            np.multiply(n[k], nc, out=p[6 + k])
+            np.subtract(centre[k], p[6 + k], out=p[6 + k])
+    w = views.weights
+    X, conditioning = _solve(np.einsum("cn,ckn->kn", w, P))
+    if depth_weighted:
+        R3 = np.stack([cam.R[2] for cam in views.cameras])  # (C, 3)
+        f2 = np.array([views.pixel_scale(c) ** 2 for c in range(C)])[:, None]
+        for _ in range(iterations):
+            z = R3 @ X.T + views.t[:, 2:3]
+            X, conditioning = _solve(np.einsum("cn,ckn->kn", w * f2 / (z * z), P))
     return X, conditioning
 
 
-def _add_ray(normal: Normal3, n: FloatArray, centre: FloatArray, w: FloatArray) -> None:
-    """Add ``w (I - n n')`` to A and ``w (I - n n') c`` to b, n of shape (3, N)."""
-    wn = w * n
-    a = normal.a
-    a[0] += w - wn[0] * n[0]
-    a[1] -= wn[0] * n[1]
-    a[2] -= wn[0] * n[2]
-    a[3] += w - wn[1] * n[1]
-    a[4] -= wn[1] * n[2]
-    a[5] += w - wn[2] * n[2]
-    nc = n[0] * centre[0] + n[1] * centre[1] + n[2] * centre[2]
-    for k in range(3):
-        normal.b[k] += w * centre[k] - wn[k] * nc
+#: Index pairs of the 6 distinct entries of a symmetric 3x3 matrix, in Normal3's order.
+_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _solve(entries: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Solve normal equations given as 9 rows (6 of A, 3 of b), shape (9, N)."""
+    normal = Normal3(0)
+    normal.a = entries[:6]
+    normal.b = entries[6:]
+    return normal.solve()
 
 
 def _add_rows(

@@ -26,7 +26,7 @@ Method = Literal["odle", "dlt", "midpoint"]
 #: The estimators :func:`triangulate` knows.
 METHODS: tuple[str, ...] = ("odle", "dlt", "midpoint")
 
-_BLOCK = 1 << 14  # points per block
+_BLOCK = 1 << 13  # points per block: temporaries of 64 KiB stay in the CPU cache
 
 
 @dataclass(frozen=True)
