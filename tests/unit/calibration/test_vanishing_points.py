@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import doctest
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from spotlab.calibration import vanishing_point
+from spotlab.calibration import vanishing, vanishing_point
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Camera
 
@@ -110,3 +112,8 @@ def test_shape_mismatch() -> None:
 def test_nan_positions() -> None:
     with pytest.raises(CalibrationError, match="NaN"):
         vanishing_point(np.zeros((3, 2)), [0.0, np.nan, 2.0])
+
+
+def test_docstring_example_runs() -> None:
+    failures, tried = doctest.testmod(vanishing, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert tried > 0 and failures == 0
