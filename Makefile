@@ -33,6 +33,7 @@ unit: $(STAMP)
 test: lint typecheck layers unit
 
 bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
 	$(BIN)/python benchmarks/run_all.py
 
 # One million mutated inputs through every SPX decoder path (about 20 minutes on 2 cores).

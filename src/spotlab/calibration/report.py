@@ -25,7 +25,7 @@ BoolArray = NDArray[np.bool_]
 
 #: Verdict thresholds: (reprojection RMS px, wand SD as a fraction of its length,
 #: image coverage fraction) for "good" and for "acceptable".
-VERDICT_LIMITS = {"good": (0.5, 0.002, 0.5), "acceptable": (1.5, 0.01, 0.25)}
+VERDICT_LIMITS = {"good": (0.5, 0.002, 0.4), "acceptable": (1.5, 0.01, 0.2)}
 
 _GRID = (16, 12)
 

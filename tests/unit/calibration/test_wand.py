@@ -8,12 +8,10 @@ import numpy as np
 import pytest
 
 from spotlab.calibration import wand_calibrate, write_report_figure
-from spotlab.calibration._rays import intersect
-from spotlab.calibration.report import wand_lengths
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Camera, Rig
 from spotlab.simulators.rigs import look_at, ring_rig
-from spotlab.simulators.wand_dance import WandDance, wand_dance
+from spotlab.simulators.wand_dance import WandDance, score_rig, wand_dance
 
 
 def _scene(seed: int = 0, noise: float = 0.2, cameras: int = 4, frames: int = 600, **kw):
@@ -28,26 +26,8 @@ def _calibrate(d: WandDance, **kw):
 
 
 def _scores(rig: Rig, d: WandDance, *, aligned: bool = False) -> np.ndarray:
-    """Held-out wand length RMS error (mm), body 3-D RMS error (mm), held-out reprojection
-    RMS (px); with ``aligned`` the body points are first rigidly aligned to the truth."""
-    H = d.held_out_wand
-    lengths = wand_lengths(rig, H, np.all(np.isfinite(H), axis=-1))
-    wand = np.sqrt(np.nanmean((lengths - d.wand_length) ** 2))
-    C = len(rig)
-    Fb, _, M, _ = d.body.shape
-    X, _ = intersect(list(rig), d.body.transpose(1, 0, 2, 3).reshape(C, Fb * M, 2))
-    truth = d.body_true.reshape(-1, 3)
-    ok = np.all(np.isfinite(X), axis=1)
-    X, truth = X[ok], truth[ok]
-    if aligned:
-        u, _, vt = np.linalg.svd((truth - truth.mean(0)).T @ (X - X.mean(0)))
-        R = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
-        X = (X - X.mean(0)) @ R.T + truth.mean(0)
-    body = np.sqrt(np.mean(np.sum((X - truth) ** 2, axis=1)))
-    uv = H.transpose(1, 0, 2, 3).reshape(C, -1, 2)
-    Xh, _ = intersect(list(rig), uv)
-    reproj = np.sqrt(np.nanmean((rig.project(Xh) - uv) ** 2))
-    return np.array([wand, body, reproj])
+    """Held-out wand length RMS (mm), body 3-D RMS (mm), held-out reprojection RMS (px)."""
+    return np.array(list(score_rig(rig, d, aligned=aligned).values()))
 
 
 def test_noise_free_data_give_the_true_rig_exactly() -> None:
