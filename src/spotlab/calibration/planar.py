@@ -284,6 +284,19 @@ def view_points(image_points: Any, n_points: int, what: str = "image_points") ->
     return uv
 
 
+def image_size_checked(image_size: Any) -> tuple[int, int]:
+    """``(width, height)`` as positive whole pixels, else :class:`CalibrationError`."""
+    try:
+        w, h = (float(v) for v in image_size)
+    except (TypeError, ValueError):
+        raise CalibrationError(
+            f"image_size must be (width, height) in px, got {image_size!r}"
+        ) from None
+    if not (w > 0 and h > 0 and w.is_integer() and h.is_integer()):
+        raise CalibrationError(f"image_size must be positive whole pixels, got {image_size!r}")
+    return int(w), int(h)
+
+
 def check_determined(std: FloatArray, K: FloatArray, what: str = "") -> None:
     """Refuse intrinsics the data leave undetermined.
 
@@ -382,9 +395,7 @@ def calibrate_intrinsics(
     uv = view_points(image_points, model.shape[0])
     if uv.ndim != 3:
         raise CalibrationError(f"image_points must have shape (V, P, 2), got {uv.shape}")
-    size = (int(image_size[0]), int(image_size[1]))
-    if size[0] <= 0 or size[1] <= 0:
-        raise CalibrationError(f"image_size must be positive (width, height), got {image_size!r}")
+    size = image_size_checked(image_size)
     need = 3 if skew else 2
     if uv.shape[0] < need:
         raise CalibrationError(

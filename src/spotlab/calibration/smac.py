@@ -22,6 +22,7 @@ from spotlab.calibration.planar import (
     camera_mask,
     check_determined,
     check_grid,
+    image_size_checked,
     usable_views,
     view_points,
 )
@@ -123,7 +124,7 @@ def _sizes(image_size: Any, n_cam: int) -> list[tuple[int, int]]:
         raise CalibrationError(
             f"image_size must be (width, height) or one per camera ({n_cam}, 2), got {arr.shape}"
         )
-    return [(int(w), int(h)) for w, h in arr]
+    return [image_size_checked(row) for row in arr]
 
 
 def smac_calibrate(

@@ -177,3 +177,6 @@ def test_nan_and_bad_grids(scene: tuple[np.ndarray, np.ndarray]) -> None:
         calibrate_intrinsics(model, uv, SIZE, distortion=("k1", "k4"))
     with pytest.raises(CalibrationError, match="4 points"):
         fit_homography(model[:3, :2], uv[0, :3])
+    for size in ((0, 480), (640.5, 480), "640x480"):
+        with pytest.raises(CalibrationError, match="image_size"):
+            calibrate_intrinsics(model, uv, size)  # type: ignore[arg-type]
