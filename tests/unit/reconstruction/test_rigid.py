@@ -143,3 +143,10 @@ def test_bad_weights_raise() -> None:
 def test_docstring_example_runs() -> None:
     failures, tried = doctest.testmod(rigid, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert tried > 0 and failures == 0
+
+
+def test_package_exports() -> None:
+    import spotlab.reconstruction as rec
+
+    for name in ("rigid_fit", "rigid_pose", "fit_body_to_images", "choose_identity"):
+        assert name in rec.__all__ and callable(getattr(rec, name))
