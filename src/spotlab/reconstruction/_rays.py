@@ -105,6 +105,12 @@ def normalized_coordinates(
             exact = camera.normalize(np.stack([u[slow], v[slow]], axis=-1))
         except CalibrationError as exc:
             raise ReconstructionError(f"camera {camera.name!r}: {exc}") from None
+        _, _, j00, j01, j11 = brown(exact[:, 0], exact[:, 1], camera.dist)
+        if not np.all((j00 * j11 - j01 * j01 > 0.0) & (j00 + j11 > 0.0)):
+            raise ReconstructionError(
+                f"camera {camera.name!r}: pixels beyond the radius where the distortion "
+                "polynomial turns back; no unique ray there"
+            )
         x[slow] = exact[:, 0]
         y[slow] = exact[:, 1]
     return x, y
@@ -113,16 +119,20 @@ def normalized_coordinates(
 def _newton_step(
     x: FloatArray, y: FloatArray, x_d: FloatArray, y_d: FloatArray, dist: FloatArray
 ) -> FloatArray:
-    """One Newton step towards ``brown(x, y) = (x_d, y_d)`` in place; returns its size."""
+    """One Newton step towards ``brown(x, y) = (x_d, y_d)`` in place; returns its size
+    (inf where the Jacobian is not positive definite)."""
     xd, yd, j00, j01, j11 = brown(x, y, dist)
     ex = xd - x_d
     ey = yd - y_d
-    inv_det = 1.0 / (j00 * j11 - j01 * j01)
+    det = j00 * j11 - j01 * j01
+    inv_det = 1.0 / det
     dx = (j11 * ex - j01 * ey) * inv_det
     dy = (j00 * ey - j01 * ex) * inv_det
     x -= dx
     y -= dy
-    return np.asarray(np.maximum(np.abs(dx), np.abs(dy)))
+    # A Jacobian that is not positive definite: the folded branch (no unique inverse).
+    ok = (det > 0.0) & (j00 + j11 > 0.0)
+    return np.asarray(np.where(ok, np.maximum(np.abs(dx), np.abs(dy)), np.inf))
 
 
 def world_rays(camera: Camera, u: FloatArray, v: FloatArray) -> FloatArray:
