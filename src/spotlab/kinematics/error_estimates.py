@@ -153,6 +153,16 @@ def four_combinations(
     return mean, sd
 
 
+def _value_and_interval(value: Any, what: str, interval: Any) -> tuple[FloatArray, FloatArray]:
+    v = np.asarray(value, dtype=np.float64)
+    tau = np.asarray(interval, dtype=np.float64)
+    if np.any(~np.isfinite(v) | (v < 0.0)):
+        raise KinematicsError(f"{what} must be finite and >= 0")
+    if np.any(~np.isfinite(tau) | (tau <= 0.0)):
+        raise KinematicsError("interval must be finite and > 0 (s)")
+    return v, tau
+
+
 def sigma2_tau(sd: Any, interval: Any) -> FloatArray:
     r"""Woltring's figure of merit :math:`\sigma^2 \tau` (variance times sampling interval).
 
@@ -178,12 +188,7 @@ def sigma2_tau(sd: Any, interval: Any) -> FloatArray:
     it as "a useful criterion for comparing spatio-temporal resolution between
     systems" (Woltring 1984).
     """
-    s = np.asarray(sd, dtype=np.float64)
-    tau = np.asarray(interval, dtype=np.float64)
-    if np.any(~np.isfinite(s) | (s < 0.0)):
-        raise KinematicsError("sd must be finite and >= 0")
-    if np.any(~np.isfinite(tau) | (tau <= 0.0)):
-        raise KinematicsError("interval must be finite and > 0 (s)")
+    s, tau = _value_and_interval(sd, "sd", interval)
     return np.asarray(s**2 * tau, dtype=np.float64)
 
 
@@ -202,10 +207,5 @@ def equivalent_sd(figure: Any, interval: Any) -> FloatArray:
     ndarray
         :math:`(\sigma^2 \tau / \tau')^{1/2}`.
     """
-    f = np.asarray(figure, dtype=np.float64)
-    tau = np.asarray(interval, dtype=np.float64)
-    if np.any(~np.isfinite(f) | (f < 0.0)):
-        raise KinematicsError("the sigma^2 tau figure must be finite and >= 0")
-    if np.any(~np.isfinite(tau) | (tau <= 0.0)):
-        raise KinematicsError("interval must be finite and > 0 (s)")
+    f, tau = _value_and_interval(figure, "the sigma^2 tau figure", interval)
     return np.asarray(np.sqrt(f / tau), dtype=np.float64)
