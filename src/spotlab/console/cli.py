@@ -22,7 +22,7 @@ from spotlab.console.errors import (
 from spotlab.core.errors import SpotlabError
 
 # Modules of spotlab.console.commands, each with add_parser(subparsers) and run(args).
-COMMANDS: tuple[str, ...] = ("devices", "sim", "record", "info", "demo", "udev")
+COMMANDS: tuple[str, ...] = ("devices", "sim", "record", "info", "calibrate", "demo", "udev")
 
 
 class _Parser(argparse.ArgumentParser):
