@@ -56,12 +56,11 @@ class Views:
         w: FloatArray,
     ) -> Views:
         t = np.stack([cam.t + cam.R @ origin for cam in cameras])
-        x = np.empty(seen.shape)
-        y = np.empty(seen.shape)
+        x = np.zeros(seen.shape)
+        y = np.zeros(seen.shape)
         for c, cam in enumerate(cameras):
-            x[c], y[c] = normalized_coordinates(cam, uv[c, :, 0], uv[c, :, 1])
-        np.nan_to_num(x, copy=False, nan=0.0)
-        np.nan_to_num(y, copy=False, nan=0.0)
+            idx = np.flatnonzero(seen[c])  # undistort only what the camera sees
+            x[c, idx], y[c, idx] = normalized_coordinates(cam, uv[c, idx, 0], uv[c, idx, 1])
         return cls(cameras, origin, t, x, y, seen, np.where(seen, w, 0.0))
 
     def depth(self, c: int, X: FloatArray) -> FloatArray:
