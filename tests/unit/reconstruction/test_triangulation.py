@@ -7,6 +7,8 @@ estimate (the noise floor).
 
 from __future__ import annotations
 
+import doctest
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -202,3 +204,10 @@ def test_result_flags_outliers_and_parallel_rays() -> None:
     with pytest.raises(Exception, match="parallel"):
         triangulate(pair, uv2, strict=True)
     assert np.all(np.isfinite(triangulate(pair, uv2, min_conditioning=0.0)))
+
+
+def test_docstring_examples() -> None:
+    from spotlab.reconstruction import triangulation
+
+    failures, tried = doctest.testmod(triangulation, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert tried > 0 and failures == 0
