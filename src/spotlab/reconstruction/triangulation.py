@@ -66,6 +66,11 @@ class TriangulationResult:
     outlier: NDArray[np.bool_]
 
 
+def _seen(uv: FloatArray) -> NDArray[np.bool_]:
+    """Observations with both coordinates (a reduction over the last axis of 2 is slow)."""
+    return np.isfinite(uv[..., 0]) & np.isfinite(uv[..., 1])
+
+
 def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray]:
     if not isinstance(rig, Rig):
         raise ReconstructionError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
@@ -80,7 +85,7 @@ def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray
         raise ReconstructionError(
             f"uv holds observations of {arr.shape[0]} cameras but the rig has {C}"
         )
-    if np.isinf(arr).any():
+    if (np.isinf(arr[..., 0]) | np.isinf(arr[..., 1])).any():
         raise ReconstructionError("uv holds infinite values: mark unseen points with NaN")
     if weights is None:
         w = np.ones(arr.shape[:-1])
@@ -92,7 +97,7 @@ def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray
                 f"weights of shape {np.shape(weights)} do not broadcast to the rays "
                 f"{arr.shape[:-1]} (C, ...)"
             ) from None
-        seen = np.all(np.isfinite(arr), axis=-1)
+        seen = _seen(arr)
         if not np.all(np.isfinite(w[seen]) & (w[seen] >= 0.0)):
             raise ReconstructionError("weights must be finite and >= 0 for every seen ray")
     return rig, arr, w
@@ -253,7 +258,7 @@ def _triangulate(
     C = len(rig)
     shape = arr.shape[1:-1]
     flat = arr.reshape(C, -1, 2)
-    seen = np.all(np.isfinite(flat), axis=-1)
+    seen = _seen(flat)
     n_views = seen.sum(axis=0)
     few = n_views < 2
     if strict and few.any():
