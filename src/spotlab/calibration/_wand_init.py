@@ -47,6 +47,7 @@ class ColdStart:
     directions: FloatArray  # (F, 3) unit
     usable: BoolArray  # (F,) frames with both ends seen by >= 2 cameras
     tree: list[tuple[int, int]]  # (parent, child) camera pairs used
+    root: int  # the camera the tree starts from
 
 
 def _homography(src: FloatArray, dst: FloatArray) -> FloatArray:
@@ -242,16 +243,17 @@ def cold_start(
         d = np.einsum("cni,cij->cnj", h, rotations)
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
-    # World frame from the reference object.
-    fxn = (frame_uv - pp[:, None, :]) / focal[:, None, None]
-    fseen = np.all(np.isfinite(frame_uv), axis=-1)
-    Y, _ = nearest_points(centres_c, rays(np.nan_to_num(fxn)), fseen)
-    ok = np.all(np.isfinite(Y), axis=1)
-    _check_reference_span(frame_points[ok], int(np.count_nonzero(ok)))
-    R_a, t_a = _horn(frame_points[ok], Y[ok])
-    translations = np.einsum("cij,j->ci", rotations, t_a) + translations
-    rotations = rotations @ R_a
-    centres_c = -np.einsum("cji,cj->ci", rotations, translations)
+    # World frame from the reference object (without one, the root camera's frame).
+    if frame_points.shape[0]:
+        fxn = (frame_uv - pp[:, None, :]) / focal[:, None, None]
+        fseen = np.all(np.isfinite(frame_uv), axis=-1)
+        Y, _ = nearest_points(centres_c, rays(np.nan_to_num(fxn)), fseen)
+        ok = np.all(np.isfinite(Y), axis=1)
+        _check_reference_span(frame_points[ok], int(np.count_nonzero(ok)))
+        R_a, t_a = _horn(frame_points[ok], Y[ok])
+        translations = np.einsum("cij,j->ci", rotations, t_a) + translations
+        rotations = rotations @ R_a
+        centres_c = -np.einsum("cji,cj->ci", rotations, translations)
 
     # Wand poses.
     ends_seen = np.all(np.isfinite(wand_uv), axis=-1)  # (F, C, 2)
@@ -274,6 +276,7 @@ def cold_start(
         directions=direction,
         usable=usable,
         tree=[(p, q) for p, q in tree],
+        root=root,
     )
 
 

@@ -1,4 +1,4 @@
-"""Wand self-calibration of a camera rig from a cold start (Woltring & Huiskes 1990, §5).
+"""Wand self-calibration of a camera rig from a cold start (Woltring & Huiskes 1990).
 
 ``wand_calibrate`` needs no initial guess: the cold start (``_wand_init``) finds every
 camera's principal distance, orientation and position from the reference object and the
@@ -93,6 +93,10 @@ def _check(
     length = float(wand_length)
     if not np.isfinite(length) or length <= 0:
         raise CalibrationError(f"wand_length must be a positive length in mm, got {wand_length}")
+    if (frame is None) != (frame_points is None):
+        raise CalibrationError("give both frame and frame_points, or neither")
+    if frame is None:
+        frame, frame_points = np.full((C, 0, 2), np.nan), np.zeros((0, 3))
     frame = np.asarray(frame, dtype=np.float64)
     frame_points = np.asarray(frame_points, dtype=np.float64)
     if frame_points.ndim != 2 or frame_points.shape[1] != 3:
@@ -161,9 +165,14 @@ def _frame_weight(wand_res: FloatArray, frame_res: FloatArray) -> float:
     return float(np.clip(var_w / max(var_f, 1e-300), 1.0, 1e4))
 
 
-def _free_mask(C: int, stage: str, distortion: Sequence[str], principal_point: bool) -> BoolArray:
+def _free_mask(
+    C: int, stage: str, distortion: Sequence[str], principal_point: bool, fixed: int | None
+) -> BoolArray:
+    """Adjusted parameters per camera; ``fixed`` camera keeps its pose (gauge)."""
     free = np.zeros((C, BLOCK), dtype=bool)
     free[:, 0:8] = True  # rotation, translation, fx, fy
+    if fixed is not None:
+        free[fixed, 0:6] = False
     if stage == "full":
         if principal_point:
             free[:, 8:10] = True
@@ -193,10 +202,12 @@ def wand_calibrate(
         Image points (px) of both wand ends per frame and camera, NaN where unseen.
     wand_length : float
         Distance between the wand's two markers (mm).
-    frame : array_like, shape (C, P, 2)
+    frame : array_like, shape (C, P, 2), or None
         Image points (px) of the static reference object (L-frame or triad), averaged
-        over its static recording, NaN where unseen.
-    frame_points : array_like, shape (P, 3)
+        over its static recording, NaN where unseen. ``None`` (with ``frame_points``
+        None) when there is none: the world frame is then the camera frame of the
+        camera that shares most wand frames with the others (``report["world"]``).
+    frame_points : array_like, shape (P, 3), or None
         The reference object's marker coordinates (mm), which define the world frame.
     image_size : (width, height) or array_like, shape (C, 2)
         Image size (px) of all cameras or of each.
@@ -239,6 +250,8 @@ def wand_calibrate(
 
     say("cold start: principal distances, relative orientations, world frame")
     init = cold_start(wand, length, frame, frame_points, sizes)
+    # Without a reference object the root camera's pose fixes the world frame.
+    gauge = None if frame_points.shape[0] else init.root
     blocks = np.zeros((C, BLOCK))
     blocks[:, 3:6] = init.translations
     blocks[:, 6] = blocks[:, 7] = init.focal
@@ -257,7 +270,7 @@ def wand_calibrate(
     stages: list[dict[str, Any]] = []
     for stage in ("pose+focal", "full"):
         say(f"adjusting {coarse.size} frames: {stage}")
-        free = _free_mask(C, stage, distortion, principal_point)
+        free = _free_mask(C, stage, distortion, principal_point, gauge)
         problem = BundleProblem(wand[coarse], length, frame, frame_points, free)
         problem.huber_px = max(3.0 * _sigma(residuals(problem, state)[0]), 0.1)
         state, log = adjust(problem, state, max_iterations=40)
@@ -267,7 +280,7 @@ def wand_calibrate(
     centres, directions, ok = _retriangulate(cameras, wand)
     frames = np.flatnonzero(ok)
     state = BundleState(state.blocks, state.rotations, centres[frames], directions[frames])
-    free = _free_mask(C, "full", distortion, principal_point)
+    free = _free_mask(C, "full", distortion, principal_point, gauge)
     problem = BundleProblem(wand[frames], length, frame, frame_points, free)
     for stage in ("all frames", "outliers rejected"):
         sigma = _sigma(residuals(problem, state)[0])
@@ -294,6 +307,7 @@ def wand_calibrate(
     report["stages"] = stages
     report["timings"] = timings
     report["cold_start_tree"] = [[p + 1, q + 1] for p, q in init.tree]
+    report["world"] = "reference object" if gauge is None else f"camera frame of {names[init.root]}"
     return WandCalibration(
         rig=rig,
         report=report,
