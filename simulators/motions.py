@@ -20,7 +20,7 @@ import numpy.typing as npt
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
-MOTIONS = ("wand", "cluster", "gait")
+MOTIONS = ("wand", "cluster", "gait", "lframe")
 
 
 class Motion(ABC):
@@ -407,8 +407,10 @@ def make_motion(name: str | Path, n_markers: int, seed: int = 0) -> Motion:
 
     ``wand``: the two wand LEDs, then reference markers (an L-frame first);
     ``cluster``: rigid clusters of 4; ``gait``: the 19 walking-body markers;
-    anything else: a C3D file. Motions with too few markers are padded with
-    static reference markers, those with too many are cut.
+    ``lframe``: static reference markers only (the L-frame first, as a static
+    recording of a calibration's reference object sees it); anything else: a C3D
+    file. Motions with too few markers are padded with static reference markers,
+    those with too many are cut.
     """
     if name == "wand":
         base: Motion = WandDance(seed=seed)
@@ -416,6 +418,8 @@ def make_motion(name: str | Path, n_markers: int, seed: int = 0) -> Motion:
         base = RigidClusters(n_markers=n_markers, seed=seed)
     elif name == "gait":
         base = Gait()
+    elif name == "lframe":
+        return reference_markers(n_markers, seed)
     else:
         base = from_c3d(Path(name))
     if base.n_markers >= n_markers:

@@ -60,6 +60,9 @@ class SelspotSimOptions:
         Ambient infrared level on every detector (intensity units).
     floor_reflectance : float
         Reflectance of the floor (a mirror at z = 0); 0 for none.
+    rig_out : Path, optional
+        Where to write the simulated cameras as a spotlab rig (TOML, detector counts;
+        see :meth:`PsdModel.rig`): the truth a calibration should find.
 
     Notes
     -----
@@ -82,6 +85,7 @@ class SelspotSimOptions:
     serial: str = "SIM00042"
     ambient: float = 0.0
     floor_reflectance: float = 0.05
+    rig_out: Path | None = None
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad option."""
@@ -91,6 +95,8 @@ class SelspotSimOptions:
             raise ValueError(f"leds must be 1 to 128, got {self.leds}")
         if not 1.0 <= self.rate_hz <= 10_000.0:
             raise ValueError(f"rate must be 1 Hz to 10 kHz, got {self.rate_hz}")
+        if not 0.0 <= self.floor_reflectance <= 1.0:
+            raise ValueError(f"floor reflectance must be 0 to 1, got {self.floor_reflectance}")
         if self.motion not in MOTIONS and not Path(self.motion).is_file():
             raise ValueError(
                 f"motion {self.motion!r} is neither {', '.join(MOTIONS)} nor a C3D file"
@@ -132,8 +138,9 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         epoch_ns=now_ns,
     )
     faults = FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed)
-    return SelspotDevice(
-        build_scene(options),
+    scene = build_scene(options)
+    device = SelspotDevice(
+        scene,
         clock,
         faults,
         serial=options.serial,
@@ -143,6 +150,9 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         default_rate_hz=options.rate_hz,
         now_ns=clock.epoch_ns,
     )
+    if options.rig_out is not None:
+        device.psd.rig(scene.cameras).save(options.rig_out)
+    return device
 
 
 def url_for(options: SelspotSimOptions) -> str:

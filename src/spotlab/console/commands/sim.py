@@ -11,6 +11,7 @@ from typing import Any
 
 from spotlab.console.errors import CommandError
 from spotlab.simulators import service
+from spotlab.simulators.motions import MOTIONS
 
 
 def add_parser(sub: Any) -> None:
@@ -49,7 +50,20 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--motion",
         default="wand",
-        help="wand, cluster, gait, or a C3D file whose markers move the LEDs",
+        help="wand, cluster, gait, lframe (static L-frame), or a C3D file whose markers "
+        "move the LEDs",
+    )
+    p.add_argument(
+        "--reflectance",
+        type=float,
+        default=0.05,
+        help="floor reflectance, 0-1 (default 0.05; 0: no floor reflection)",
+    )
+    p.add_argument(
+        "--rig-out",
+        type=Path,
+        metavar="RIG.toml",
+        help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
     )
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     p.set_defaults(run=run)
@@ -63,11 +77,11 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         raise CommandError(f"--leds must be 1 to 128, got {args.leds}")
     if not args.rate > 0:
         raise CommandError(f"--rate must be positive, got {args.rate}")
+    if not 0.0 <= args.reflectance <= 1.0:
+        raise CommandError(f"--reflectance must be 0 to 1, got {args.reflectance}")
     motion = args.motion
-    if motion not in ("wand", "cluster", "gait"):
-        path = Path(motion)
-        if not path.is_file():
-            raise CommandError(f"--motion {motion!r} is neither wand, cluster, gait nor a C3D file")
+    if motion not in MOTIONS and not Path(motion).is_file():
+        raise CommandError(f"--motion {motion!r} is neither {', '.join(MOTIONS)} nor a C3D file")
     return service.SelspotSimOptions(
         cameras=args.cameras,
         leds=args.leds,
@@ -80,6 +94,8 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         clock_drift_ppm=args.clock_drift_ppm,
         clock_jitter_s=args.clock_jitter,
         motion=motion,
+        floor_reflectance=args.reflectance,
+        rig_out=args.rig_out,
     )
 
 
