@@ -184,8 +184,11 @@ def sim_pty(
     faults: str = "",
     name: str = "sim",
     transport: str = "pty",
+    extra: Sequence[object] = (),
 ) -> Iterator[Sim]:
     """``spotlab sim selspot --pty`` (or ``--tcp``) with truth and fault log.
+
+    ``extra`` arguments go to ``spotlab sim`` as they are (``--motion lframe``, ...).
 
     Yields once the device path (or ``socket://`` URL) is printed.
 
@@ -213,6 +216,7 @@ def sim_pty(
     ]
     if faults:
         args += ["--faults", faults]
+    args += list(extra)
     proc = spawn_cli(args, out, err)
     try:
         path = _first_line(out, proc, err, timeout=30.0)
