@@ -6,6 +6,7 @@ how trials longer than 65 535 frames are stored.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from pathlib import Path
 from typing import Any
@@ -17,11 +18,14 @@ from spotlab.io.trial import FileFormatError, Trial
 
 
 class _FrameStub:
-    """Stands in for the c3d Writer's frame list: its length and first frame only."""
+    """Stands in for the c3d Writer's frame list: its length, first frame and our data."""
 
-    def __init__(self, n_frames: int, points: np.ndarray, analog: np.ndarray) -> None:
+    def __init__(
+        self, n_frames: int, points: np.ndarray, analog: np.ndarray, data: np.ndarray
+    ) -> None:
         self._n = n_frames
         self._first = (points, analog)
+        self.data = data  # the data section, from _data_section
 
     def __len__(self) -> int:
         return self._n
@@ -51,23 +55,13 @@ def write_c3d(path: str | Path, trial: Trial) -> None:
     per_frame = trial.analog_per_frame
     channels = trial.analog.shape[1]
 
-    pts = np.empty((n_frames, n_markers, 4), dtype="<f4")
-    missing = np.asarray(~np.isfinite(trial.points).all(axis=2), dtype=bool)
-    pts[:, :, :3] = np.where(missing[:, :, None], 0.0, trial.points)
-    pts[:, :, 3] = np.where(missing, -1.0, 0.0)
-    analog = trial.analog.astype("<f4").reshape(n_frames, per_frame * channels)
-    block = np.concatenate([pts.reshape(n_frames, 4 * n_markers), analog], axis=1)
-    raw = np.ascontiguousarray(block, dtype="<f4").tobytes()
-
-    class _Writer(c3d.Writer):  # type: ignore[name-defined]
-        def _write_frames(self, handle: Any) -> None:
-            handle.write(raw)
-            self._pad_block(handle)
-
+    block = _data_section(trial, per_frame, channels)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "No point data found" and the like
-            writer = _Writer(point_rate=trial.point_rate, point_scale=-1.0, point_units="mm  ")
+            writer = _writer_class(c3d)(
+                point_rate=trial.point_rate, point_scale=-1.0, point_units="mm  "
+            )
             if channels:
                 writer.analog_rate = trial.analog_rate
                 writer.set_analog_labels(list(trial.analog_labels))
@@ -79,7 +73,7 @@ def write_c3d(path: str | Path, trial: Trial) -> None:
             if trial.events:
                 _add_events(writer, trial.events)
             writer._frames = _FrameStub(
-                n_frames, np.zeros((n_markers, 5)), np.zeros((channels, per_frame))
+                n_frames, np.zeros((n_markers, 5)), np.zeros((channels, per_frame)), block
             )
             with open(path, "wb") as handle:
                 writer.write(handle)
@@ -87,6 +81,46 @@ def write_c3d(path: str | Path, trial: Trial) -> None:
         raise FileFormatError(path, f"cannot write the file: {exc.strerror or exc}") from exc
     except Exception as exc:
         raise FileFormatError(path, f"C3D writer failed ({type(exc).__name__}: {exc})") from exc
+
+
+@functools.cache
+def _writer_class(c3d: Any) -> Any:
+    """The ``c3d`` package's Writer with one write of our data section for its frame loop.
+
+    Made once per module object: a class defined at each call would keep the data
+    section alive (through the reference cycle every class has) until the garbage
+    collector runs.
+    """
+
+    class _Writer(c3d.Writer):
+        def _write_frames(self, handle: Any) -> None:
+            handle.write(memoryview(self._frames.data))
+            self._pad_block(handle)
+
+    return _Writer
+
+
+def _data_section(trial: Trial, per_frame: int, channels: int) -> np.ndarray:
+    """The C3D data section as one float32 array, built without a loop over frames.
+
+    Returns
+    -------
+    ndarray, shape (F, 4 M + per_frame * channels), little-endian float32, C-contiguous
+        Row f is frame f as the file stores it: x, y, z and the residual word of each
+        marker (0, 0, 0 and -1 when any coordinate is not finite; residual 0 otherwise),
+        then the frame's analog samples, sample by sample, channel by channel.
+    """
+    n_frames, n_markers = trial.n_frames, trial.n_markers
+    block = np.empty((n_frames, 4 * n_markers + per_frame * channels), dtype="<f4")
+    pts = block[:, : 4 * n_markers].reshape(n_frames, n_markers, 4)  # a view into block
+    finite = np.isfinite(trial.points)
+    missing = ~(finite[:, :, 0] & finite[:, :, 1] & finite[:, :, 2])
+    pts[:, :, :3] = trial.points  # rounded to float32
+    pts[:, :, 3] = 0.0
+    pts[missing] = (0.0, 0.0, 0.0, -1.0)
+    if channels:
+        block[:, 4 * n_markers :] = trial.analog.reshape(n_frames, per_frame * channels)
+    return block
 
 
 def _add_events(writer: Any, events: list[tuple[str, str, float]]) -> None:
