@@ -8,10 +8,26 @@ Three ways in, one result (:class:`WandObservations`):
   ``cam{c}_end{e}_u`` and ``cam{c}_end{e}_v`` (c = 1..C, e = 1, 2; an empty cell or NaN
   where unseen), and a reference-object table with one row per marker, columns ``X``,
   ``Y``, ``Z`` (mm) and ``cam{c}_u``, ``cam{c}_v``.
-- **recordings** (``.spj``) of a SELSPOT-style system: the wand's two markers named by
-  their marker (LED) numbers in a wand-dance recording, the reference object's markers
-  in a static recording (averaged over its frames), their coordinates from a CSV with
-  columns ``X``, ``Y``, ``Z``. Detector counts are the image coordinates (4096 x 4096).
+- **recordings** (``.spj``) of one SELSPOT-style (``selspot``) system: the wand's two
+  markers named by their marker numbers in a wand-dance recording, the reference
+  object's markers in a static recording (averaged over its frames), their coordinates
+  from a CSV with columns ``X``, ``Y``, ``Z`` (mm), one row per frame marker in the
+  order of ``--frame-markers``.
+
+Recordings, in detail:
+
+- Marker ``m`` (1-based) is the ``m``-th LED of the recording's LED table, the LED
+  with id ``m - 1`` for the default table (``--leds N``).
+- Image coordinates are the PSD's detector counts as recorded, 12-bit values
+  0-4094 with the optical axis at 2048, +x right and +y down the detector. The image
+  size is 4096 x 4096 counts: spotlab's image centre, ``(W/2, H/2)``, where the
+  cold start puts the principal point, is then exactly the detector's centre 2048 (the
+  range 0-4094 would suggest 4095, whose centre 2047.5 is half a count off).
+- A reading is dropped (NaN) when the device flagged it not valid or saturated
+  (saturation pulls it towards the centre), and when it sits on the detector's edge, 0
+  or 4094 counts (clipped: the light fell further out).
+- The reference object must not move: a marker whose readings in a camera spread more
+  than :data:`STATIC_SD_MAX` counts (SD) is refused.
 """
 
 from __future__ import annotations
@@ -21,6 +37,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,13 +45,22 @@ from numpy.typing import NDArray
 from spotlab.acquisition.replay import replay
 from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
+from spotlab.core.wire import StreamDecoder
 
 __all__ = ["WandObservations", "load_csv", "load_npz", "load_recordings"]
 
 FloatArray = NDArray[np.float64]
 
-#: Image size of a lateral-photodiode camera in detector counts (12-bit coordinates).
+#: Image size of a lateral-photodiode camera in detector counts (12-bit coordinates):
+#: its centre (2048, 2048) is the detector's.
 PSD_IMAGE_SIZE = (4096, 4096)
+#: Largest detector count a reading can take; a reading there (or at 0) was clipped.
+PSD_MAX_COUNT = 4094.0
+#: SPX record flag: the ADC saturated (``docs/protocols/selspot.md``).
+FLAG_SATURATED = 0x02
+#: Largest SD (counts) of a reference marker's readings in a static recording; the PSD
+#: noise is about 2 counts at intensity 80 and grows as 1 / intensity.
+STATIC_SD_MAX = 25.0
 
 
 @dataclass
@@ -137,20 +163,66 @@ def load_csv(wand_csv: Path, frame_csv: Path, image_size: Sequence[int]) -> Wand
     return WandObservations(wand, frame, points, np.asarray(image_size, dtype=np.float64))
 
 
-def _recorded_markers(path: Path, markers: Sequence[int]) -> FloatArray:
-    """Image points (F, C, len(markers), 2) of the named markers (1-based) in a recording."""
-    blocks = []
-    for _name, block in replay(path, decoder_for):
-        blocks.append(block.data)
-    if not blocks:
+def _selspot_readings(path: Path) -> tuple[FloatArray, NDArray[np.uint8]]:
+    """Every frame of a one-stream selspot recording: data (F, M, C, 3) and flags (F, M, C)."""
+    families: list[object] = []
+
+    def factory(metadata: dict[str, Any]) -> StreamDecoder:
+        families.append(metadata.get("family"))
+        return decoder_for(metadata)
+
+    names: set[str] = set()
+    data, flags = [], []
+    for name, block in replay(path, factory):
+        names.add(name)
+        data.append(block.data)
+        flags.append(block.flags)
+    if len(names) > 1:
+        raise CommandError(
+            f"{path}: {len(names)} streams ({', '.join(sorted(names))}); calibrate reads "
+            "recordings of one device"
+        )
+    if any(f != "selspot" for f in families):
+        raise CommandError(
+            f"{path}: a {families[0]!r} recording; calibrate reads selspot (PSD) recordings"
+        )
+    if not data or sum(len(d) for d in data) == 0:
         raise CommandError(f"{path}: the recording holds no frames")
-    data = np.concatenate(blocks, axis=0)  # (F, M, C, V)
+    return np.concatenate(data), np.concatenate(flags)
+
+
+def _recorded_markers(path: Path, markers: Sequence[int], option: str) -> FloatArray:
+    """Detector counts (F, C, len(markers), 2) of the named markers (1-based), NaN if unusable."""
+    if len(set(markers)) != len(markers):
+        raise CommandError(f"{option}: a marker is named twice ({list(markers)})")
+    data, flags = _selspot_readings(path)
     M = data.shape[1]
     bad = [m for m in markers if not 1 <= m <= M]
     if bad:
-        raise CommandError(f"{path}: marker(s) {bad} not in the recording (it has 1..{M})")
+        raise CommandError(f"{option}: marker(s) {bad} not in {path} (it has markers 1..{M})")
     idx = [m - 1 for m in markers]
-    return data[:, idx, :, :2].transpose(0, 2, 1, 3)
+    uv = data[:, idx, :, :2].copy()
+    unusable = (flags[:, idx] & FLAG_SATURATED) != 0
+    unusable |= ((uv == 0) | (uv == PSD_MAX_COUNT)).any(axis=-1)
+    uv[unusable] = np.nan
+    return uv.transpose(0, 2, 1, 3)
+
+
+def _static_mean(static: FloatArray, markers: Sequence[int], path: Path) -> FloatArray:
+    """Mean over the frames (F, C, P, 2) -> (C, P, 2), NaN where never seen; refuse motion."""
+    seen = np.asarray(np.isfinite(static).all(axis=-1))  # (F, C, P)
+    n = seen.sum(axis=0)[..., None]  # (C, P, 1) frames seeing each marker
+    filled = np.where(seen[..., None], static, 0.0)
+    mean = np.where(n > 0, filled.sum(axis=0) / np.maximum(n, 1), np.nan)
+    spread = np.where(seen[..., None], static - mean, 0.0)
+    sd = np.sqrt((spread**2).sum(axis=0) / np.maximum(n - 1, 1)).max(axis=-1)  # (C, P)
+    if (sd > STATIC_SD_MAX).any():
+        c, p = (int(i) for i in np.unravel_index(int(np.argmax(sd)), sd.shape))
+        raise CommandError(
+            f"{path}: marker {markers[p]} moves in camera {c + 1} (SD {sd[c, p]:.0f} counts > "
+            f"{STATIC_SD_MAX:g}); the reference object must stand still"
+        )
+    return np.asarray(mean)
 
 
 def load_recordings(
@@ -160,24 +232,50 @@ def load_recordings(
     frame_markers: Sequence[int],
     frame_points_csv: Path,
 ) -> WandObservations:
-    """Wand and reference-object observations from SELSPOT-style recordings."""
+    """Wand and reference-object observations from SELSPOT-style recordings.
+
+    Parameters
+    ----------
+    wand_recording : Path
+        Journal (``.spj``) of the wand dance.
+    wand_markers : sequence of int
+        Marker numbers (1-based) of the wand's two ends.
+    frame_recording : Path
+        Journal of the static reference object (may be the wand recording itself).
+    frame_markers : sequence of int
+        Marker numbers of the reference object's markers.
+    frame_points_csv : Path
+        Their coordinates (mm): columns ``X``, ``Y``, ``Z``, one row per frame marker.
+
+    Returns
+    -------
+    WandObservations
+        ``wand`` (F, C, 2, 2) and ``frame`` (C, P, 2) in detector counts, the image size
+        4096 x 4096 counts (see the module docstring).
+
+    Raises
+    ------
+    CommandError
+        Naming the cause: not two wand markers, a marker named twice or not in the
+        recording, a recording without frames, of another family or of several devices,
+        a moving reference object, a points table whose rows do not match the markers.
+    """
     if len(wand_markers) != 2:
         raise CommandError("--wand-markers takes the two marker numbers of the wand's ends")
-    wand = _recorded_markers(wand_recording, wand_markers)
-    static = _recorded_markers(frame_recording, frame_markers)
-    with np.errstate(invalid="ignore"):
-        seen = np.isfinite(static).all(axis=-1).sum(axis=0)
-    frame = np.where(
-        seen[..., None] > 0,
-        np.nanmean(np.where(np.isfinite(static), static, np.nan), axis=0)
-        if static.size
-        else static,
-        np.nan,
-    )
     header, values = _table(frame_points_csv)
     points = np.stack([_column(header, values, a, frame_points_csv) for a in "XYZ"], axis=1)
     if points.shape[0] != len(frame_markers):
         raise CommandError(
             f"{frame_points_csv}: {points.shape[0]} rows for {len(frame_markers)} frame markers"
         )
+    empty = np.flatnonzero(~np.isfinite(points).all(axis=1))
+    if empty.size:
+        raise CommandError(f"{frame_points_csv}: row {empty[0] + 2} lacks a coordinate")
+    wand = _recorded_markers(wand_recording, wand_markers, "--wand-markers")
+    static = _recorded_markers(frame_recording, frame_markers, "--frame-markers")
+    if static.shape[1] != wand.shape[1]:
+        raise CommandError(
+            f"{frame_recording}: {static.shape[1]} cameras, the wand recording has {wand.shape[1]}"
+        )
+    frame = _static_mean(static, frame_markers, frame_recording)
     return WandObservations(wand, frame, points, np.asarray(PSD_IMAGE_SIZE, dtype=np.float64))
