@@ -283,9 +283,9 @@ def wand_calibrate(
     free = _free_mask(C, "full", distortion, principal_point, gauge)
     problem = BundleProblem(wand[frames], length, frame, frame_points, free)
     for stage in ("all frames", "outliers rejected"):
-        sigma = _sigma(residuals(problem, state)[0])
+        r, fr = residuals(problem, state)
+        sigma = _sigma(r)
         if stage == "outliers rejected":
-            r, fr = residuals(problem, state)
             problem.use &= ~(np.linalg.norm(r, axis=-1) > outlier_sigma * sigma)
             problem.frame_weight = _frame_weight(r[problem.use], fr)
         problem.huber_px = max(3.0 * sigma, 1e-3)
