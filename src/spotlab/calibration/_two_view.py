@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.calibration.dlt import _normalisation
 from spotlab.core.errors import CalibrationError
 
 __all__ = ["essential_matrix", "midpoints", "relative_pose", "rotation_residual"]
@@ -20,16 +21,8 @@ __all__ = ["essential_matrix", "midpoints", "relative_pose", "rotation_residual"
 FloatArray = NDArray[np.float64]
 
 
-def _conditioning(x: FloatArray) -> FloatArray:
-    """Similarity (3, 3) moving points (N, 2) to zero mean and RMS distance sqrt(2)."""
-    mean = x.mean(axis=0)
-    rms = np.sqrt(np.mean(np.sum((x - mean) ** 2, axis=1)))
-    s = np.sqrt(2.0) / max(rms, 1e-300)
-    return np.array([[s, 0.0, -s * mean[0]], [0.0, s, -s * mean[1]], [0.0, 0.0, 1.0]])
-
-
 def _eight_point(x1: FloatArray, x2: FloatArray) -> FloatArray:
-    T1, T2 = _conditioning(x1), _conditioning(x2)
+    T1, T2 = _normalisation(x1), _normalisation(x2)
     a = x1 @ T1[:2, :2].T + T1[:2, 2]
     b = x2 @ T2[:2, :2].T + T2[:2, 2]
     A = np.column_stack(

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from spotlab.calibration._rays import nearest_points
 from spotlab.calibration._two_view import midpoints, relative_pose, rotation_residual
+from spotlab.calibration.planar import fit_homography
 from spotlab.core.errors import CalibrationError
 
 __all__ = ["ColdStart", "cold_start", "focal_from_reference"]
@@ -48,26 +49,6 @@ class ColdStart:
     usable: BoolArray  # (F,) frames with both ends seen by >= 2 cameras
     tree: list[tuple[int, int]]  # (parent, child) camera pairs used
     root: int  # the camera the tree starts from
-
-
-def _homography(src: FloatArray, dst: FloatArray) -> FloatArray:
-    """Conditioned DLT homography (3, 3) mapping plane points (N, 2) to image points."""
-    H = []
-    T = []
-    for pts in (src, dst):
-        mean = pts.mean(axis=0)
-        s = np.sqrt(2.0) / max(np.sqrt(np.mean(np.sum((pts - mean) ** 2, axis=1))), 1e-300)
-        T.append(np.array([[s, 0.0, -s * mean[0]], [0.0, s, -s * mean[1]], [0.0, 0.0, 1.0]]))
-        H.append(pts @ T[-1][:2, :2].T + T[-1][:2, 2])
-    a, b = H
-    n = len(a)
-    A = np.zeros((2 * n, 9))
-    A[0::2, 0:2], A[0::2, 2] = a, 1.0
-    A[0::2, 6:8], A[0::2, 8] = -b[:, :1] * a, -b[:, 0]
-    A[1::2, 3:5], A[1::2, 5] = a, 1.0
-    A[1::2, 6:8], A[1::2, 8] = -b[:, 1:] * a, -b[:, 1]
-    _, _, vt = np.linalg.svd(A)
-    return np.linalg.solve(T[1], vt[-1].reshape(3, 3)) @ T[0]
 
 
 def _plane_frame(points: FloatArray) -> tuple[FloatArray, FloatArray, float] | None:
@@ -109,7 +90,10 @@ def focal_from_reference(uv: FloatArray, points: FloatArray, size: tuple[int, in
     x = uv - centre
     if thickness < 1e-3:
         plane = (points - mean) @ axes[:2].T
-        H = _homography(plane, x)
+        try:
+            H = fit_homography(plane, x)
+        except CalibrationError:
+            return None
         h1, h2 = H[:, 0], H[:, 1]
         # h_i' diag(1, 1, f^2)^-1... in centred pixels: w = 1/f^2 weights the first two rows.
         a1 = h1[0] * h2[0] + h1[1] * h2[1]
