@@ -16,48 +16,32 @@ Three ways in, one result (:class:`WandObservations`):
 
 Recordings, in detail:
 
-- Marker ``m`` (1-based) is the ``m``-th LED of the recording's LED table, the LED
-  with id ``m - 1`` for the default table (``--leds N``).
-- Image coordinates are the PSD's detector counts as recorded, 12-bit values
-  0-4094 with the optical axis at 2048, +x right and +y down the detector. The image
-  size is 4096 x 4096 counts: spotlab's image centre, ``(W/2, H/2)``, where the
-  cold start puts the principal point, is then exactly the detector's centre 2048 (the
-  range 0-4094 would suggest 4095, whose centre 2047.5 is half a count off).
-- A reading is dropped (NaN) when the device flagged it not valid or saturated
-  (saturation pulls it towards the centre), and when it sits on the detector's edge, 0
-  or 4094 counts (clipped: the light fell further out).
+- Markers, detector counts, the image size of 4096 x 4096 counts and the readings
+  dropped (not valid, saturated, clipped at the edge) are as in
+  :mod:`spotlab.console.recorded_observations`.
 - The reference object must not move: a marker whose readings in a camera spread more
   than :data:`STATIC_SD_MAX` counts (SD) is refused.
 """
 
 from __future__ import annotations
 
-import csv
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
-from spotlab.core.wire import StreamDecoder
+from spotlab.console.recorded_observations import PSD_IMAGE_SIZE, read_selspot, usable_counts
+from spotlab.console.tables import camera_count as _cameras
+from spotlab.console.tables import column as _column
+from spotlab.console.tables import read_table as _table
 
 __all__ = ["WandObservations", "load_csv", "load_npz", "load_recordings"]
 
 FloatArray = NDArray[np.float64]
 
-#: Image size of a lateral-photodiode camera in detector counts (12-bit coordinates):
-#: its centre (2048, 2048) is the detector's.
-PSD_IMAGE_SIZE = (4096, 4096)
-#: Largest detector count a reading can take; a reading there (or at 0) was clipped.
-PSD_MAX_COUNT = 4094.0
-#: SPX record flag: the ADC saturated (``docs/protocols/selspot.md``).
-FLAG_SATURATED = 0x02
 #: Largest SD (counts) of a reference marker's readings in a static recording; the PSD
 #: noise is about 2 counts at intensity 80 and grows as 1 / intensity.
 STATIC_SD_MAX = 25.0
@@ -97,49 +81,6 @@ def load_npz(path: Path) -> WandObservations:
     )
 
 
-def _table(path: Path) -> tuple[list[str], FloatArray]:
-    try:
-        with path.open(newline="") as fh:
-            rows = list(csv.reader(fh))
-    except OSError as exc:
-        raise CommandError(f"{path}: {exc.strerror}") from None
-    if len(rows) < 2:
-        raise CommandError(f"{path}: needs a header row and at least one data row")
-    header = [h.strip() for h in rows[0]]
-    values = np.full((len(rows) - 1, len(header)), np.nan)
-    for i, row in enumerate(rows[1:]):
-        if len(row) != len(header):
-            raise CommandError(
-                f"{path}: row {i + 2} has {len(row)} cells, the header has {len(header)}"
-            )
-        for j, cell in enumerate(row):
-            cell = cell.strip()
-            if cell:
-                try:
-                    values[i, j] = float(cell)
-                except ValueError:
-                    raise CommandError(
-                        f"{path}: row {i + 2}, column {header[j]!r}: {cell!r} is not a number"
-                    ) from None
-    return header, values
-
-
-def _cameras(header: Sequence[str], pattern: str, path: Path) -> int:
-    found = {int(m.group(1)) for h in header if (m := re.fullmatch(pattern, h))}
-    if not found:
-        raise CommandError(f"{path}: no camera columns like {pattern!r} in the header")
-    if found != set(range(1, max(found) + 1)):
-        raise CommandError(f"{path}: camera columns must be numbered 1..C, found {sorted(found)}")
-    return max(found)
-
-
-def _column(header: Sequence[str], values: FloatArray, name: str, path: Path) -> FloatArray:
-    try:
-        return values[:, list(header).index(name)]
-    except ValueError:
-        raise CommandError(f"{path}: column {name!r} is missing") from None
-
-
 def load_csv(wand_csv: Path, frame_csv: Path, image_size: Sequence[int]) -> WandObservations:
     """Read the wand and reference-object tables (see the module docstring)."""
     header, values = _table(wand_csv)
@@ -165,30 +106,8 @@ def load_csv(wand_csv: Path, frame_csv: Path, image_size: Sequence[int]) -> Wand
 
 def _selspot_readings(path: Path) -> tuple[FloatArray, NDArray[np.uint8]]:
     """Every frame of a one-stream selspot recording: data (F, M, C, 3) and flags (F, M, C)."""
-    families: list[object] = []
-
-    def factory(metadata: dict[str, Any]) -> StreamDecoder:
-        families.append(metadata.get("family"))
-        return decoder_for(metadata)
-
-    names: set[str] = set()
-    data, flags = [], []
-    for name, block in replay(path, factory):
-        names.add(name)
-        data.append(block.data)
-        flags.append(block.flags)
-    if len(names) > 1:
-        raise CommandError(
-            f"{path}: {len(names)} streams ({', '.join(sorted(names))}); calibrate reads "
-            "recordings of one device"
-        )
-    if any(f != "selspot" for f in families):
-        raise CommandError(
-            f"{path}: a {families[0]!r} recording; calibrate reads selspot (PSD) recordings"
-        )
-    if not data or sum(len(d) for d in data) == 0:
-        raise CommandError(f"{path}: the recording holds no frames")
-    return np.concatenate(data), np.concatenate(flags)
+    recording = read_selspot(path)
+    return recording.data, recording.flags
 
 
 def _recorded_markers(path: Path, markers: Sequence[int], option: str) -> FloatArray:
@@ -201,11 +120,7 @@ def _recorded_markers(path: Path, markers: Sequence[int], option: str) -> FloatA
     if bad:
         raise CommandError(f"{option}: marker(s) {bad} not in {path} (it has markers 1..{M})")
     idx = [m - 1 for m in markers]
-    uv = data[:, idx, :, :2].copy()
-    unusable = (flags[:, idx] & FLAG_SATURATED) != 0
-    unusable |= ((uv == 0) | (uv == PSD_MAX_COUNT)).any(axis=-1)
-    uv[unusable] = np.nan
-    return uv.transpose(0, 2, 1, 3)
+    return usable_counts(data[:, idx], flags[:, idx]).transpose(0, 2, 1, 3)
 
 
 def _static_mean(static: FloatArray, markers: Sequence[int], path: Path) -> FloatArray:
