@@ -62,3 +62,8 @@ class CalibrationError(SpotlabError, ValueError):
 
 class ReconstructionError(SpotlabError, ValueError):
     """Reconstruction input is degenerate (too few views, collinear markers, ...)."""
+
+
+class ClockError(SpotlabError, ValueError):
+    """Clock-model input is unusable (too few pairs, NaN, ticks going backwards, a stopped
+    reference) or a clock model cannot be fitted or applied."""
