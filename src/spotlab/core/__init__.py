@@ -4,6 +4,7 @@ from spotlab.core.crc import crc16, crc16_hex, crc32
 from spotlab.core.errors import (
     BandwidthError,
     CalibrationError,
+    ClockError,
     ConfigurationError,
     DeviceDisconnected,
     DeviceError,
@@ -24,6 +25,7 @@ __all__ = [
     "STREAM_KINDS",
     "BandwidthError",
     "CalibrationError",
+    "ClockError",
     "ConfigurationError",
     "CounterUnwrapper",
     "DeviceDisconnected",
