@@ -14,6 +14,7 @@ from spotlab.core.errors import (
     ReconstructionError,
     RecordingError,
     SpotlabError,
+    SynchronisationError,
 )
 from spotlab.core.frames import Frame, FrameBlock
 from spotlab.core.streams import STREAM_KINDS, StreamSpec
@@ -39,6 +40,7 @@ __all__ = [
     "RecordingError",
     "SpotlabError",
     "StreamSpec",
+    "SynchronisationError",
     "crc16",
     "crc16_hex",
     "crc32",

@@ -67,3 +67,7 @@ class ReconstructionError(SpotlabError, ValueError):
 class ClockError(SpotlabError, ValueError):
     """Clock-model input is unusable (too few pairs, NaN, ticks going backwards, a stopped
     reference) or a clock model cannot be fitted or applied."""
+
+
+class SynchronisationError(SpotlabError, ValueError):
+    """Streams cannot be put on one time base (times not increasing, seq going back, ...)."""
