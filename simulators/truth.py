@@ -124,3 +124,73 @@ class TruthWriter:
                 row.sent = False
         self.drain(force=True)
         self._closed = True
+
+
+@dataclass
+class TruthPositions:
+    """The marker positions of a truth CSV (see the module docstring).
+
+    Attributes
+    ----------
+    device_tick : ndarray of int64, shape (N,)
+        Device tick (µs modulo 2**32) of each frame taken.
+    sent : ndarray of bool, shape (N,)
+        Whether the frame went onto the line.
+    positions : ndarray, shape (N, L, 3)
+        True position of every LED id 0 .. L-1 (mm), NaN where it has none.
+    """
+
+    device_tick: I64
+    sent: npt.NDArray[np.bool_]
+    positions: F64
+
+    def at_ticks(self, ticks: npt.ArrayLike) -> F64:
+        """Positions (F, L, 3) of the frames sent at device ticks ``ticks`` (F,), unwrapped or
+        not; NaN for a tick the device never sent."""
+        keys = np.asarray(ticks, dtype=np.int64) % (1 << 32)
+        sent = np.flatnonzero(self.sent)
+        order = sent[np.argsort(self.device_tick[sent], kind="stable")]
+        table = self.device_tick[order]
+        pos = np.minimum(np.searchsorted(table, keys), max(table.size - 1, 0))
+        out = np.full((keys.size, *self.positions.shape[1:]), np.nan)
+        if table.size:
+            found = table[pos] == keys
+            out[found] = self.positions[order[pos[found]]]
+        return out
+
+
+def read_truth_positions(path: str | Path) -> TruthPositions:
+    """Read the device ticks and LED positions of a truth CSV written by :class:`TruthWriter`.
+
+    Rows cut short (a simulator killed while writing) are skipped.
+
+    Raises
+    ------
+    ValueError
+        If the file is not a truth CSV (its header does not start as :class:`TruthWriter`
+        writes it).
+    """
+    with open(path, encoding="ascii") as fh:
+        header = fh.readline().strip().split(",")
+        if header[:7] != [
+            "stream",
+            "seq",
+            "frame_no",
+            "sent",
+            "true_time_s",
+            "device_tick",
+            "device_us",
+        ]:
+            raise ValueError(f"{path}: not a spotlab truth CSV (header {header[:7]})")
+        rows = [
+            line.split(",")
+            for line in fh
+            if line.endswith("\n") and line.count(",") == len(header) - 1
+        ]
+    values = np.array(rows, dtype=np.float64).reshape(len(rows), len(header))
+    n_leds = (len(header) - 7) // 3
+    return TruthPositions(
+        device_tick=values[:, 5].astype(np.int64),
+        sent=values[:, 3] != 0,
+        positions=values[:, 7:].reshape(len(rows), n_leds, 3),
+    )
