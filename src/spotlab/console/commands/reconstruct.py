@@ -1,0 +1,56 @@
+"""``spotlab reconstruct``: observations + calibration -> marker trajectories (C3D or TRC).
+
+Observations are npz arrays, a CSV table or a SELSPOT-style recording (see
+:mod:`spotlab.console.marker_observations`); the work is done by
+:mod:`spotlab.console.trajectories`, which ``spotlab export`` shares.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from spotlab.console.trajectories import (
+    check_outputs,
+    print_summary,
+    reconstruct_file,
+    write_trial,
+)
+from spotlab.reconstruction import METHODS
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "reconstruct",
+        help="triangulate marker trajectories from observations and a calibration",
+        description="Triangulate every frame of the observations (npz, CSV or a .spj "
+        "recording) with a calibrated rig and write the trajectories as C3D or TRC "
+        "(by the suffix of --out).",
+    )
+    p.add_argument("input", type=Path, help="observations: OBS.npz, OBS.csv or RECORDING.spj")
+    p.add_argument("--calibration", type=Path, required=True, help="rig (TOML)")
+    p.add_argument("--out", type=Path, required=True, help="trajectories to write (.c3d, .trc)")
+    p.add_argument("--method", choices=METHODS, default="odle", help="estimator (default odle)")
+    p.add_argument("--rate", type=float, help="frame rate in Hz (needed for CSV input)")
+    p.add_argument("--labels", nargs="+", metavar="LABEL", help="marker names, one per marker")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    check_outputs([args.out])
+    result = reconstruct_file(
+        args.input,
+        args.calibration,
+        method=args.method,
+        rate_hz=args.rate,
+        labels=args.labels,
+    )
+    write_trial(args.out, result.trial)
+    if args.json:
+        print(json.dumps({**result.summary, "outputs": [str(args.out)]}))
+    else:
+        print_summary(result.summary, [args.out])
+    return 0

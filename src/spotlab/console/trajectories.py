@@ -1,0 +1,252 @@
+"""Observations + calibration -> marker trajectories -> C3D or TRC: the shared path of
+``spotlab reconstruct`` and ``spotlab export``.
+
+The rig's cameras are matched to the observation's by name when the observations name
+their cameras, else by order. Frames are triangulated in chunks
+(:func:`spotlab.reconstruction.triangulate_points`) with progress on stderr.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.console.errors import CommandError
+from spotlab.console.marker_observations import MarkerObservations, load_observations
+from spotlab.console.progress import Progress
+from spotlab.core.errors import CalibrationError
+from spotlab.geometry import Rig
+from spotlab.io import Trial, write_c3d, write_trc
+from spotlab.reconstruction import METHODS, triangulate_points
+
+__all__ = [
+    "TRIAL_WRITERS",
+    "Reconstruction",
+    "check_outputs",
+    "load_rig",
+    "match_cameras",
+    "print_summary",
+    "reconstruct",
+    "reconstruct_file",
+    "write_trial",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Trial file writers by suffix.
+TRIAL_WRITERS = {".c3d": write_c3d, ".trc": write_trc}
+#: Frames triangulated at once (progress is shown between chunks).
+CHUNK_FRAMES = 500
+
+
+@dataclass
+class Reconstruction:
+    """Trajectories and how well the rays met.
+
+    Attributes
+    ----------
+    trial : Trial
+        Marker trajectories (F, M, 3) in mm, NaN where fewer than two cameras saw a
+        marker.
+    summary : dict
+        JSON-safe figures: frames, markers, rate, reconstructed fraction, RMS ray residual
+        (px) overall and per camera, method, and facts of the input.
+    ticks : ndarray of int64, shape (F,), or None
+        Device time stamp of each frame of a recording (-1 for a lost frame).
+    """
+
+    trial: Trial
+    summary: dict[str, Any]
+    ticks: NDArray[np.int64] | None = None
+
+
+def load_rig(path: Path) -> Rig:
+    """Read a calibration (TOML, anipose / Pose2Sim layout); a bad file is a CommandError."""
+    if not path.is_file():
+        raise CommandError(f"{path}: no such calibration file")
+    try:
+        return Rig.load(path)
+    except CalibrationError as exc:
+        text = str(exc)
+        raise CommandError(text if str(path) in text else f"{path}: {text}") from None
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise CommandError(f"{path}: not a calibration file ({exc})") from None
+
+
+def match_cameras(rig: Rig, n_cameras: int, names: Sequence[str] | None) -> Rig:
+    """The rig's cameras in the order of the observation's ``n_cameras`` cameras.
+
+    By name when ``names`` is given (the rig may hold more cameras), else by order (the
+    counts must agree).
+
+    Raises
+    ------
+    CommandError
+        For a camera name the rig lacks or a count that differs.
+    """
+    if names is not None:
+        if len(names) != n_cameras:
+            raise CommandError(f"{len(names)} camera names for {n_cameras} cameras observed")
+        index = {name: i for i, name in enumerate(rig.names)}
+        missing = [n for n in names if n not in index]
+        if missing:
+            raise CommandError(
+                f"the calibration has no camera {', '.join(map(repr, missing))} "
+                f"(it has {', '.join(rig.names)})"
+            )
+        return Rig([rig[index[n]] for n in names])
+    if len(rig) != n_cameras:
+        raise CommandError(
+            f"the observations have {n_cameras} cameras but the calibration has {len(rig)}"
+        )
+    return rig
+
+
+def check_outputs(paths: Sequence[Path]) -> None:
+    """Refuse an output whose suffix names no trial format, before any work is done."""
+    for path in paths:
+        if path.suffix.lower() not in TRIAL_WRITERS:
+            raise CommandError(
+                f"{path}: unknown output format {path.suffix!r} ({', '.join(TRIAL_WRITERS)})"
+            )
+        if not path.parent.is_dir():
+            raise CommandError(f"{path}: the folder {path.parent} does not exist")
+
+
+def write_trial(path: Path, trial: Trial) -> None:
+    """Write ``trial`` as C3D or TRC, chosen by the suffix of ``path``."""
+    check_outputs([path])
+    TRIAL_WRITERS[path.suffix.lower()](path, trial)
+
+
+def reconstruct(
+    rig: Rig,
+    obs: MarkerObservations,
+    *,
+    method: str = "odle",
+    rate_hz: float | None = None,
+    labels: Sequence[str] | None = None,
+    progress: Progress | None = None,
+) -> Reconstruction:
+    """Triangulate every frame of ``obs`` with the matching cameras of ``rig``.
+
+    Parameters
+    ----------
+    rig : Rig
+        The calibration (in the units of the observations: px or detector counts).
+    obs : MarkerObservations
+        uv (F, C, M, 2).
+    method : {"odle", "dlt", "midpoint"}
+        Estimator of :func:`spotlab.reconstruction.triangulate_points`.
+    rate_hz : float, optional
+        Frame rate; overrides the observations' own.
+    labels : sequence of str, optional
+        Marker names (M); override the observations' own.
+    progress : Progress, optional
+        Shown per chunk of frames.
+
+    Returns
+    -------
+    Reconstruction
+
+    Raises
+    ------
+    CommandError
+        For an unknown rate, labels whose count differs from the markers', cameras that
+        do not match the rig.
+    ReconstructionError
+        From the triangulation (for example ``midpoint`` with other than two views).
+    """
+    if method not in METHODS:
+        raise CommandError(f"unknown method {method!r} ({', '.join(METHODS)})")
+    F, C, M, _ = obs.uv.shape
+    rate = rate_hz if rate_hz is not None else obs.rate_hz
+    if rate is None:
+        raise CommandError("the frame rate is not known: give --rate HZ")
+    if not (np.isfinite(rate) and rate > 0):
+        raise CommandError(f"the frame rate must be a positive number of Hz, not {rate:g}")
+    names = list(labels) if labels else obs.labels or [f"M{m + 1}" for m in range(M)]
+    if len(names) != M:
+        raise CommandError(f"{len(names)} marker labels for {M} markers")
+    cameras = match_cameras(rig, C, obs.camera_names)
+    uv = obs.uv.transpose(1, 0, 2, 3)  # (C, F, M, 2)
+    points = np.full((F, M, 3), np.nan)
+    square = np.zeros(C)  # sum of squared ray errors of reconstructed points, per camera
+    rays = np.zeros(C, dtype=np.int64)
+    for start in range(0, F, CHUNK_FRAMES):
+        stop = min(F, start + CHUNK_FRAMES)
+        result = triangulate_points(cameras, uv[:, start:stop], cast(Any, method))
+        points[start:stop] = result.points
+        error = np.where(np.isfinite(result.points[..., 0]), result.ray_error, np.nan)
+        square += np.nansum(error**2, axis=(1, 2))
+        rays += np.isfinite(error).sum(axis=(1, 2))
+        if progress is not None:
+            progress.update(stop, f"{stop} of {F} frames")
+    if progress is not None:
+        progress.close()
+    done = np.isfinite(points[..., 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        per_camera = np.sqrt(square / rays)
+    total = int(rays.sum())
+    summary: dict[str, Any] = {
+        "frames": F,
+        "markers": M,
+        "cameras": C,
+        "rate_hz": float(rate),
+        "method": method,
+        "reconstructed_fraction": round(float(done.mean()), 6),
+        "markers_reconstructed": int(done.any(axis=0).sum()),
+        "rms_ray_px": float(np.sqrt(square.sum() / total)) if total else None,
+        "rms_ray_px_per_camera": {
+            cam.name or f"cam{c + 1}": (float(per_camera[c]) if rays[c] else None)
+            for c, cam in enumerate(cameras)
+        },
+        **obs.facts,
+    }
+    trial = Trial(points, names, float(rate), metadata={"method": method})
+    return Reconstruction(trial, summary, obs.ticks)
+
+
+def reconstruct_file(
+    observations: Path,
+    calibration: Path,
+    *,
+    method: str = "odle",
+    rate_hz: float | None = None,
+    labels: Sequence[str] | None = None,
+    show_progress: bool = True,
+) -> Reconstruction:
+    """:func:`reconstruct` from files: observations (npz, CSV, ``.spj``) and a calibration."""
+    rig = load_rig(calibration)
+    obs = load_observations(observations)
+    progress = Progress("reconstructing", total=obs.uv.shape[0]) if show_progress else None
+    result = reconstruct(rig, obs, method=method, rate_hz=rate_hz, labels=labels, progress=progress)
+    result.summary = {
+        "input": str(observations),
+        "calibration": str(calibration),
+        **result.summary,
+    }
+    return result
+
+
+def print_summary(summary: dict[str, Any], outputs: Sequence[Path]) -> None:
+    """The human-readable summary of a reconstruction on stdout."""
+    rms = summary["rms_ray_px"]
+    lost = summary.get("lost_frames")
+    print(
+        f"reconstructed {summary['frames']} frames x {summary['markers']} markers at "
+        f"{summary['rate_hz']:g} Hz ({summary['method']}, {summary['cameras']} cameras)"
+        + (f", {lost} frames lost in the recording" if lost else "")
+    )
+    print(
+        f"  reconstructed      {100 * summary['reconstructed_fraction']:.1f} % of marker "
+        f"samples ({summary['markers_reconstructed']} markers seen)"
+    )
+    print("  RMS ray residual   " + ("-" if rms is None else f"{rms:.3f} px"))
+    for path in outputs:
+        print(f"  wrote              {path}")
