@@ -22,7 +22,17 @@ from spotlab.console.errors import (
 from spotlab.core.errors import SpotlabError
 
 # Modules of spotlab.console.commands, each with add_parser(subparsers) and run(args).
-COMMANDS: tuple[str, ...] = ("devices", "sim", "record", "info", "calibrate", "demo", "udev")
+COMMANDS: tuple[str, ...] = (
+    "devices",
+    "sim",
+    "record",
+    "info",
+    "calibrate",
+    "reconstruct",
+    "export",
+    "demo",
+    "udev",
+)
 
 
 class _Parser(argparse.ArgumentParser):
