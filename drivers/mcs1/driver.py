@@ -1,0 +1,463 @@
+"""The state machine every MCS-1 family shares: bring-up, streaming, recovery, stop.
+
+:class:`Mcs1Driver` opens the port at 9600 baud, resets the device (BREAK,
+else ``RESET:``) and waits for its banner, moves to the streaming baud rate
+(``COMM``, then ``VER:0`` within 1 s, else reset and try once more), lets the
+family check the device's ``VER:0`` reply, sends the configuration commands
+(every reply checked) and starts the stream. :meth:`recv` decodes what the port
+holds.
+
+While streaming the driver watches for the faults of selspot.md §7 and recovers
+by itself: a port that went away, the device's reset banner, or no valid frame
+for ``max(0.5 s, 20 frame periods)``. It then reopens the port as often as
+needed, resets, renegotiates, reconfigures and restarts, marks the discontinuity
+in the decoder, counts a reconnect and a gap, and tells the taps
+(``disconnected`` / ``device_reset``, then ``reconnected``).
+
+A family (``drivers/selspot``, ``drivers/timer``) provides its configuration
+(:class:`Mcs1Config`), its decoder (:class:`Mcs1Decoder`), ``family_code``,
+:meth:`Mcs1Driver._check_device`, :meth:`Mcs1Driver._describe_load` and
+:meth:`Mcs1Driver._device_info`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from abc import abstractmethod
+from collections.abc import Iterable
+from typing import Any, ClassVar, Protocol
+
+from serial.tools import list_ports
+
+from spotlab.core.errors import (
+    ConfigurationError,
+    DeviceDisconnected,
+    DeviceError,
+    DeviceTimeout,
+    ProtocolError,
+)
+from spotlab.core.frames import FrameBlock
+from spotlab.core.stats import LinkStats
+from spotlab.core.wire import LinkEventKind
+from spotlab.drivers.base import DeviceInfo, Driver
+from spotlab.drivers.mcs1.commands import (
+    RESET_BAUD,
+    DeviceConfigurationError,
+    Reply,
+    encode_command,
+    parse_reply,
+)
+from spotlab.drivers.mcs1.framing import EventFrame
+from spotlab.drivers.mcs1.link import SerialLink
+from spotlab.drivers.mcs1.session import CommandChannel
+
+log = logging.getLogger(__name__)
+
+#: Pause between two reconnection attempts (s).
+RETRY_INTERVAL = 0.05
+#: Longest wait for the banner while recovering (s): a returning device answers in ms.
+RECOVERY_RESET_WAIT = 0.5
+#: Faults after which the driver tries to recover instead of raising.
+_TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
+
+
+class Mcs1Config(Protocol):
+    """What the state machine needs of a family's configuration."""
+
+    @property
+    def baud(self) -> int:
+        """Line rate while streaming."""
+
+    @property
+    def rate_hz(self) -> float:
+        """Frame rate in Hz."""
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes of one data frame."""
+
+    @property
+    def line_bits_per_s(self) -> float:
+        """Bits per second the stream occupies on the line."""
+
+    def commands(self) -> list[tuple[str, str]]:
+        """``(verb, args)`` of the configuration commands, in the order to send them."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe form."""
+
+
+class Mcs1Decoder(Protocol):
+    """What the state machine needs of a family's stream decoder."""
+
+    stats: LinkStats
+    banner_seen: bool
+
+    @property
+    def buffered(self) -> int:
+        """Bytes received and not yet decoded."""
+
+    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
+        """Decode received bytes."""
+
+    def flush(self) -> FrameBlock:
+        """Resolve the bytes still buffered."""
+
+    def mark_discontinuity(self) -> None:
+        """The link was broken: drop buffered bytes, restart the counters."""
+
+    def take_events(self) -> list[EventFrame]:
+        """Replies received inside event frames since the last call."""
+
+
+class Mcs1Driver(Driver):
+    """Driver of an MCS-1 device; a family subclass fills in the hooks.
+
+    Parameters
+    ----------
+    port : str or path-like
+        Device path or pyserial URL.
+    config : Mcs1Config
+        The family's checked configuration.
+    decoder : Mcs1Decoder
+        The family's decoder, built on ``self.stats`` (the subclass builds it
+        after ``Driver.__init__`` and passes it here).
+    name : str, optional
+        Stream name; the family name by default.
+    reply_timeout : float
+        Seconds to wait for each reply and for the reset banner.
+    reconnect_timeout : float or None
+        Give up recovering after this many seconds (``DeviceDisconnected``);
+        ``None`` keeps trying for as long as ``recv`` is called.
+    """
+
+    family_code: ClassVar[str] = ""
+    #: The family's configuration (set by the subclass before :meth:`_setup`).
+    config: Mcs1Config
+    _decoder: Mcs1Decoder
+
+    def _setup(
+        self,
+        config: Mcs1Config,
+        decoder: Mcs1Decoder,
+        reply_timeout: float,
+        reconnect_timeout: float | None,
+    ) -> None:
+        """Second half of ``__init__`` (after ``Driver.__init__`` and the family's own)."""
+        if not reply_timeout > 0:
+            raise ConfigurationError(f"reply_timeout must be positive, got {reply_timeout}")
+        self.reply_timeout = reply_timeout
+        self.reconnect_timeout = reconnect_timeout
+        self._decoder = decoder
+        self._link = SerialLink(self.port, on_rx=self._tap_rx, on_tx=self._tap_tx)
+        self._channel = CommandChannel(self._link, reply_timeout, self.stats)
+        self._streaming = False
+        self._stash: list[FrameBlock] = []
+        self._recovering: str | None = None
+        self._outage_start = 0.0
+        period_s = 1.0 / config.rate_hz
+        self._silence_ns = int(max(0.5, 20 * period_s) * 1e9)
+        send_s = config.frame_bytes * 10 / config.baud
+        self._idle_flush_ns = int(max(0.05, 3 * send_s) * 1e9)
+        self._last_frame_ns = 0
+        self._last_rx_ns = 0
+
+    @abstractmethod
+    def _check_device(self, reply: Reply) -> None:
+        """Parse the ``VER:0`` reply and keep it; ``ConfigurationError`` if the device cannot."""
+
+    @abstractmethod
+    def _describe_load(self) -> str:
+        """What the configuration asks of the line, for the bandwidth message."""
+
+    @classmethod
+    @abstractmethod
+    def _device_info(cls, port: str, text: str) -> DeviceInfo:
+        """A :class:`DeviceInfo` from a ``VER:0`` reply text (raises ``ProtocolError``)."""
+
+    @property
+    def recovering(self) -> bool:
+        """Whether the driver is reconnecting after a fault."""
+        return self._recovering is not None
+
+    # -- life cycle ----------------------------------------------------------------
+    def _start(self) -> None:
+        try:
+            if not self._link.is_open:
+                self._link.open()
+                self._tap_event("open", port=self.port)
+            self._bring_up(self.reply_timeout)
+        except BaseException:
+            self._link.close()
+            raise
+
+    def _bring_up(self, reset_wait: float, streaming_baud: int | None = None) -> None:
+        """Reset, negotiate, configure and start; one more try if it fails after the reset."""
+        for attempt in (1, 2):
+            self._reset(reset_wait, streaming_baud)
+            try:
+                self._configure_and_start()
+                return
+            except (DeviceTimeout, ProtocolError) as exc:
+                if attempt == 2:
+                    raise
+                log.info("%s: %s; resetting and trying once more", self.port, exc)
+
+    def _reset(self, wait: float, streaming_baud: int | None) -> None:
+        try:
+            self._channel.reset(wait, streaming_baud=streaming_baud)
+        except DeviceTimeout as exc:
+            if streaming_baud is not None or self.config.baud == RESET_BAUD:
+                raise
+            # No banner at 9600: the device may still stream at our rate (a recording
+            # killed before its STOP:), deaf to RESET: at 9600 where no BREAK reaches it
+            # (pseudo-terminals, TCP).
+            log.info("%s: no reset banner at 9600 baud; trying at %d", self.port, self.config.baud)
+            try:
+                self._channel.reset(min(wait, RECOVERY_RESET_WAIT), streaming_baud=self.config.baud)
+            except DeviceTimeout:
+                raise exc from None
+
+    def _configure_and_start(self) -> None:
+        c = self.config
+        reply = self._channel.negotiate(c.baud, self.family_code)
+        self._tap_event("baud_change", baud=c.baud)
+        self._check_device(reply)
+        for verb, args in c.commands():
+            self._channel.transact(verb, args)
+        self._tap_event("configured", config=c.to_dict())
+        try:
+            self._channel.transact("START")
+        except DeviceError as exc:
+            if exc.code == 0x80:
+                raise type(exc)(
+                    f"{exc}; the host computes {c.line_bits_per_s / 1e6:.4g} Mbit/s for "
+                    f"{self._describe_load()}, "
+                    f"{c.baud} baud with 20 % reserve carries "
+                    f"{0.8 * c.baud / 1e6:.4g}: lower the rate or use a faster baud",
+                    code=exc.code,
+                ) from exc
+            raise
+        # The stream restarts: seq and frame_no count from 0 again.
+        self._decoder.mark_discontinuity()
+        self._streaming = True
+        now = time.monotonic_ns()
+        self._last_frame_ns = self._last_rx_ns = now
+        self._tap_event("started")
+
+    def command(self, text: str) -> Reply:
+        """Send one command (``"VERB:ARGS"`` or ``"VERB"``) and return the device's reply.
+
+        Works while idle and while streaming (the reply then comes in an event
+        frame; data frames that arrive meanwhile are kept for :meth:`recv`).
+
+        Raises
+        ------
+        DeviceError
+            With the device's code when it answers ``ERRORxx``.
+        DeviceTimeout
+            If no reply comes within ``reply_timeout``.
+        """
+        verb, _, args = text.partition(":")
+        if not self._link.is_open:
+            raise DeviceError(f"{self.port} is not open: call start() first")
+        if not self._streaming:
+            return self._channel.transact(verb, args)
+        self._link.write(encode_command(verb, args))
+        return self._await_event_reply(f"{verb}:{args}")
+
+    def _stop(self) -> None:
+        if self._recovering is not None:
+            self._recovering = None
+            return
+        if not self._streaming:
+            return
+        self._streaming = False
+        try:
+            self._link.write(encode_command("STOP"))
+            self._await_event_reply("STOP:", okay_only=True)
+        except DeviceDisconnected as exc:
+            log.warning("%s: port lost while stopping: %s", self.port, exc)
+        self._tap_event("stopped")
+
+    def _await_event_reply(self, command: str, okay_only: bool = False) -> Reply:
+        """Decode frames until the reply's event frame; keep the frames for ``recv``."""
+        deadline = time.monotonic() + self.reply_timeout
+        while True:
+            self._read_and_decode(deadline - time.monotonic())
+            for event in self._decoder.take_events():
+                try:
+                    reply = parse_reply(event.payload)
+                except ProtocolError as exc:
+                    log.warning(
+                        "%s: while waiting for the reply to %s: %s", self.port, command, exc
+                    )
+                    continue
+                reply.raise_for_error(command)
+                if reply.kind == "okay" or not okay_only:
+                    return reply
+            if time.monotonic() >= deadline:
+                raise DeviceTimeout(
+                    f"no reply to {command} from {self.port} within {self.reply_timeout:g} s"
+                )
+
+    def _close(self) -> None:
+        self._streaming = False
+        self._recovering = None
+        if self._link.is_open:
+            self._link.close()
+            self._tap_event("close", port=self.port)
+
+    # -- streaming -----------------------------------------------------------------
+    def _read_and_decode(self, timeout: float | None) -> FrameBlock | None:
+        """One read, decoded; flush a frame that stopped arriving. Frames go to the stash."""
+        data, t_ns = self._link.read(None if timeout is None else max(0.0, timeout))
+        block = self._decoder.feed(data, t_ns) if data else None
+        if data:
+            self._last_rx_ns = t_ns
+        elif self._decoder.buffered and t_ns - self._last_rx_ns > self._idle_flush_ns:
+            block = self._decoder.flush()
+        if block is not None and len(block):
+            self._last_frame_ns = t_ns
+            self._stash.append(block)
+        return block
+
+    def _recv_internal(self, timeout: float | None) -> FrameBlock | None:
+        if self._stash:
+            return self._stash.pop(0)
+        if self._recovering is not None:
+            self._recover(timeout)
+            return None
+        if not self._streaming:
+            raise DeviceError(f"{self.name} on {self.port} is not streaming: call start() first")
+        try:
+            self._read_and_decode(timeout)
+        except DeviceDisconnected as exc:
+            self._begin_recovery("disconnected", str(exc))
+            return None
+        self._watch_events()
+        now = time.monotonic_ns()
+        if self._decoder.banner_seen:
+            self._decoder.banner_seen = False
+            self._begin_recovery("device_reset", "the device sent its reset banner")
+        elif now - self._last_frame_ns > self._silence_ns:
+            self._begin_recovery(
+                "device_reset", f"no valid frame for {(now - self._last_frame_ns) / 1e9:.2f} s"
+            )
+        return self._stash.pop(0) if self._stash else None
+
+    def _watch_events(self) -> None:
+        """Replies that arrive while streaming (none are expected): log them."""
+        for event in self._decoder.take_events():
+            try:
+                reply = parse_reply(event.payload)
+            except ProtocolError as exc:
+                log.warning("%s: unexpected event frame: %s", self.port, exc)
+                continue
+            level = logging.WARNING if reply.kind in ("error", "warn") else logging.INFO
+            log.log(level, "%s: device sent %r while streaming", self.port, reply.text)
+
+    # -- recovery ------------------------------------------------------------------
+    def _begin_recovery(self, kind: LinkEventKind, reason: str) -> None:
+        log.warning("%s: %s; reconnecting", self.port, reason)
+        self._streaming = False
+        self._recovering = reason
+        self._outage_start = time.monotonic()
+        self._tap_event(kind, reason=reason)
+
+    def _recover(self, timeout: float | None) -> None:
+        """Try to reconnect until it works or ``timeout`` passes (at least one try)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self._try_reconnect():
+            now = time.monotonic()
+            if (
+                self.reconnect_timeout is not None
+                and now - self._outage_start > self.reconnect_timeout
+            ):
+                reason, self._recovering = self._recovering, None
+                self._link.close()
+                raise DeviceDisconnected(
+                    f"{self.port}: could not reconnect within {self.reconnect_timeout:g} s "
+                    f"after: {reason}"
+                )
+            wait = RETRY_INTERVAL if deadline is None else min(RETRY_INTERVAL, deadline - now)
+            if wait <= 0:
+                return
+            time.sleep(wait)
+
+    def _try_reconnect(self) -> bool:
+        try:
+            if not self._link.is_open:
+                self._link.open()
+                self._tap_event("open", port=self.port)
+            # After a lost port the device may still stream at our rate, deaf to RESET:
+            # at 9600 (no BREAK crosses a pseudo-terminal or TCP).
+            self._bring_up(min(self.reply_timeout, RECOVERY_RESET_WAIT), self.config.baud)
+        except DeviceConfigurationError:
+            raise
+        except DeviceDisconnected:
+            self._link.close()
+            return False
+        except (*_TRANSIENT, DeviceError):
+            return False
+        outage = time.monotonic() - self._outage_start
+        self.stats.reconnects += 1
+        self.stats.gaps += 1
+        self._tap_event("reconnected", reason=self._recovering, outage_s=round(outage, 3))
+        log.warning("%s: streaming again after %.2f s", self.port, outage)
+        self._recovering = None
+        return True
+
+    # -- discovery -----------------------------------------------------------------
+    @classmethod
+    def detect(
+        cls, ports: Iterable[str | os.PathLike[str]] | None = None, timeout: float = 0.3
+    ) -> list[DeviceInfo]:
+        """Devices of this family answering on this machine's serial ports.
+
+        Parameters
+        ----------
+        ports : iterable of str, optional
+            Ports or URLs to probe; by default every serial port the OS lists
+            with hardware behind it (ports whose hardware id is ``n/a``, such
+            as unused built-in ``ttyS`` ports, are skipped).
+        timeout : float
+            Seconds to wait for each port's reset banner and reply.
+
+        Returns
+        -------
+        list of DeviceInfo
+            One per device that answered ``VER:0`` with the family's code. Each probed device
+            is left reset (9600 baud, not streaming). Ports that cannot be
+            opened (busy, no permission) are skipped.
+        """
+        if ports is None:
+            ports = [p.device for p in list_ports.comports() if p.hwid and p.hwid != "n/a"]
+        found = []
+        for port in ports:
+            info = cls._probe(os.fspath(port), timeout)
+            if info is not None:
+                found.append(info)
+        return found
+
+    @classmethod
+    def _probe(cls, port: str, timeout: float) -> DeviceInfo | None:
+        link = SerialLink(port)
+        try:
+            link.open()
+        except (DeviceError, ConfigurationError) as exc:
+            log.debug("detect: skipping %s: %s", port, exc)
+            return None
+        try:
+            channel = CommandChannel(link, timeout)
+            channel.reset(timeout)
+            reply = channel.transact("VER", "0", data_prefix=cls.family_code)
+            info = cls._device_info(port, reply.text)
+        except (DeviceError, ProtocolError, ConfigurationError) as exc:
+            log.debug("detect: no %s device on %s: %s", cls.family_code, port, exc)
+            return None
+        finally:
+            link.close()
+        return info
