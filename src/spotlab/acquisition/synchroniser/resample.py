@@ -92,8 +92,9 @@ def resample(
     a line). Shifting all of a marker's sample times by :math:`o_m` shifts its spline,
     so the spline is built on the frame times and evaluated at :math:`t - o_m`. The
     value at instant :math:`t` is given only when :math:`T_i \le t - o_m \le T_{i+1}`
-    for a usable interval ``i``: never across a gap, never extrapolated beyond a
-    stream's ends; elsewhere it is NaN and its flag says why. Inside a run the
+    for a usable interval ``i``, or when :math:`t - o_m` is a present sample's own time:
+    never across a gap, never extrapolated beyond a stream's ends; elsewhere it is NaN
+    and its flag says why. Inside a run the
     interpolation error of a smooth signal is of order :math:`h^4 \max|y^{(4)}|`, ``h``
     the frame interval (de Boor, A Practical Guide to Splines, ch. V); a cubic is
     reproduced exactly.
@@ -144,11 +145,15 @@ def resample(
     def at(a: npt.NDArray[Any], j: npt.NDArray[np.intp]) -> npt.NDArray[Any]:
         return np.take_along_axis(a, j, axis=0)
 
-    # Outside the stream's span only OUTSIDE; inside, the interval's frame gaps and
-    # MISSING when a sample at either end is absent.
-    inside = np.where(outside, 0, gaps[i])[:, :, None] | np.where(at(pair, ii), 0, MISSING)
+    # Outside the stream's span only OUTSIDE; on a sample's own time only MISSING when it
+    # is absent; between samples the interval's frame gaps and MISSING when a sample at
+    # either end is absent.
+    on_sample = (local == x[i])[:, :, None]
+    between = np.where(outside, 0, gaps[i])[:, :, None] | np.where(at(pair, ii), 0, MISSING)
+    inside = np.where(on_sample, np.where(at(present, ii), 0, MISSING), between)
     flags: U8 = np.where(outside[:, :, None], OUTSIDE, inside).astype(np.uint8)
-    out = _spline.hermite(at(y3, ii), at(y3, ii + 1), at(slope, ii), at(slope, ii + 1), h, w)
+    yz = np.where(present, y3, 0.0)
+    out = _spline.hermite(at(yz, ii), at(yz, ii + 1), at(slope, ii), at(slope, ii + 1), h, w)
     out = np.where(flags == 0, out, np.nan)
     return Resampled(
         values=out.reshape(u.size, m, *trailing),
