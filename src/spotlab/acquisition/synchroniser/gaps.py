@@ -3,7 +3,8 @@
 Between two consecutive frames ``i`` and ``i + 1`` of a stream there is a gap when
 
 * frames were lost: ``seq[i + 1] - seq[i] > 1``;
-* the stream stalled or its clock stepped: ``T[i + 1] - T[i] > max_interval``;
+* the stream stalled or its clock stepped: ``T[i + 1] - T[i] > (seq[i + 1] - seq[i]) *
+  max_interval`` (longer than the frames between them explain);
 
 and, for one channel (a marker's value in one sensor), when either sample is NaN. An
 interval with none of these is *usable*; a resampled value is given only inside a usable
@@ -102,7 +103,8 @@ def frame_gaps(seq: I64, frame_times: F64, max_interval_s: float) -> U8:
     frame_times : ndarray, shape (F,)
         Checked frame times, s.
     max_interval_s : float
-        Largest interval between two frames that is not a gap, s (> 0, may be inf).
+        Largest interval between two consecutive frames that is not a gap, s (> 0, may
+        be inf); per seq step when frames were lost between them.
 
     Returns
     -------
@@ -116,8 +118,9 @@ def frame_gaps(seq: I64, frame_times: F64, max_interval_s: float) -> U8:
     """
     if not max_interval_s > 0:
         raise SynchronisationError(f"largest frame interval must be > 0 s, got {max_interval_s}")
-    lost = np.diff(seq) > 1
-    late = np.diff(frame_times) > max_interval_s
+    steps = np.diff(seq)
+    lost = steps > 1
+    late = np.diff(frame_times) > steps * max_interval_s
     return (np.where(lost, LOST_FRAMES, 0) | np.where(late, TIME_GAP, 0)).astype(np.uint8)
 
 

@@ -65,7 +65,8 @@ class StreamStats:
     lost_frames : int
         Frames missing according to seq (sum of the jumps beyond 1).
     time_gaps : int
-        Frame intervals longer than the largest allowed one (stalls, clock steps).
+        Frame intervals longer than the largest allowed one times their seq step
+        (stalls, clock steps).
     missing_runs : int
         Runs of missing (NaN) samples, over every channel, not counting lost frames.
     rate_hz : float

@@ -60,7 +60,10 @@ def test_sample_offsets_refuse_bad_clock_rate(rate: float) -> None:
 def test_frame_gaps_flag_lost_frames_and_long_intervals() -> None:
     seq, t = check_frames([0, 1, 2, 5, 6, 7], [0.0, 0.01, 0.02, 0.05, 0.06, 0.1])
     g = frame_gaps(seq, t, max_interval_s=0.015)
-    assert_array_equal(g, [0, 0, LOST_FRAMES | TIME_GAP, 0, TIME_GAP])
+    assert_array_equal(g, [0, 0, LOST_FRAMES, 0, TIME_GAP])
+    # Lost frames that do not explain the whole interval: a stall as well.
+    g = frame_gaps(seq, t, max_interval_s=0.009)
+    assert_array_equal(g, [TIME_GAP, TIME_GAP, LOST_FRAMES | TIME_GAP, TIME_GAP, TIME_GAP])
     assert_array_equal(frame_gaps(seq, t, np.inf), [0, 0, LOST_FRAMES, 0, 0])
     with pytest.raises(SynchronisationError, match="> 0"):
         frame_gaps(seq, t, 0.0)
