@@ -15,9 +15,42 @@ from numpy.typing import NDArray
 
 from spotlab.geometry import Camera
 from spotlab.reconstruction._normal_equations import Normal3
-from spotlab.reconstruction._rays import brown, normalized_coordinates
+from spotlab.reconstruction._rays import Lens, brown
 
 FloatArray = NDArray[np.float64]
+
+
+class Frame:
+    """What the estimators need of a rig, computed once per call.
+
+    Parameters
+    ----------
+    cameras : tuple of Camera
+    origin : ndarray, shape (3,)
+        World point (mm) the computations are centred on.
+
+    Attributes
+    ----------
+    t : ndarray, shape (C, 3)
+        Camera translations in the centred frame (``t + R origin``).
+    lenses : list of Lens
+        The intrinsic parameters for undistortion.
+    odle_matrix : ndarray, shape (9, 7 C)
+        Maps the per-ray sums of :func:`odle` to its normal equations.
+    r3 : ndarray, shape (C, 3)
+        Optical axes (third rows of R).
+    f2 : ndarray, shape (C, 1)
+        Squared principal distances (px^2).
+    """
+
+    def __init__(self, cameras: tuple[Camera, ...], origin: FloatArray) -> None:
+        self.cameras = cameras
+        self.origin = origin
+        self.t = np.stack([cam.t + cam.R @ origin for cam in cameras])
+        self.lenses = [Lens(cam) for cam in cameras]
+        self.odle_matrix = _odle_matrix(np.stack([cam.R for cam in cameras]), self.t)
+        self.r3 = np.stack([cam.R[2] for cam in cameras])
+        self.f2 = np.array([[cam.K[0, 0] * cam.K[1, 1]] for cam in cameras])
 
 
 @dataclass
@@ -26,9 +59,8 @@ class Views:
 
     Attributes
     ----------
+    frame : Frame
     cameras : tuple of Camera
-    origin : ndarray, shape (3,)
-        World point (mm) the computations are centred on.
     t : ndarray, shape (C, 3)
         Camera translations in the centred frame (``t + R origin``).
     x, y : ndarray, shape (C, N)
@@ -38,8 +70,8 @@ class Views:
         User weights, 0 where unseen.
     """
 
+    frame: Frame
     cameras: tuple[Camera, ...]
-    origin: FloatArray
     t: FloatArray
     x: FloatArray
     y: FloatArray
@@ -49,29 +81,56 @@ class Views:
     @classmethod
     def build(
         cls,
-        cameras: tuple[Camera, ...],
-        origin: FloatArray,
-        uv: FloatArray,
+        frame: Frame,
+        x: FloatArray,
+        y: FloatArray,
         seen: NDArray[np.bool_],
-        w: FloatArray,
+        w: FloatArray | None,
     ) -> Views:
-        t = np.stack([cam.t + cam.R @ origin for cam in cameras])
-        x = np.zeros(seen.shape)
-        y = np.zeros(seen.shape)
-        for c, cam in enumerate(cameras):
-            idx = np.flatnonzero(seen[c])  # undistort only what the camera sees
-            x[c, idx], y[c, idx] = normalized_coordinates(cam, uv[c, idx, 0], uv[c, idx, 1])
-        return cls(cameras, origin, t, x, y, seen, np.where(seen, w, 0.0))
+        """Views of undistorted observations ``x, y`` (C, N) (see
+        :func:`spotlab.reconstruction._rays.normalize_seen`); ``w`` (C, N) are the user
+        weights (None: 1)."""
+        weights = seen.astype(np.float64) if w is None else np.where(seen, w, 0.0)
+        return cls(frame, frame.cameras, frame.t, x, y, seen, weights)
 
     def depth(self, c: int, X: FloatArray) -> FloatArray:
         """Depth ``z_cam`` (mm) of centred points X (N, 3) in camera c."""
         r = self.cameras[c].R[2]
         return np.asarray(X @ r + self.t[c, 2])
 
-    def pixel_scale(self, c: int) -> float:
-        """Principal distance (px) that turns normalised distances into pixels."""
-        K = self.cameras[c].K
-        return float(np.sqrt(K[0, 0] * K[1, 1]))
+
+#: Index pairs of the 6 distinct entries of a symmetric 3x3 matrix, in Normal3's order.
+_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _odle_matrix(R: FloatArray, t: FloatArray) -> FloatArray:
+    """The linear map from the per-ray sums of :func:`odle` to its normal equations.
+
+    With ``m = (x, y, 1)`` and ``d = R' m`` the ray direction of camera c, ``S = m m'``
+    has the 6 distinct entries ``(x^2, xy, x, y^2, y, 1)``; ``A = sum w I - sum
+    (w / m'm) R' S R`` and ``b = sum w c + sum (w / m'm) R' S t`` (``R c = -t``) are
+    linear in them. Columns ``7 c .. 7 c + 5`` take ``(w / m'm) S`` of camera c, column
+    ``7 c + 6`` its ``w``; rows are the 6 entries of A then the 3 of b.
+    """
+    C = R.shape[0]
+    M = np.zeros((9, 7 * C))
+    for c in range(C):
+        Rc, tc = R[c], t[c]
+        for q, (i, j) in enumerate(_PAIRS):
+            for p, (r, s) in enumerate(_PAIRS):
+                coef = Rc[i, r] * Rc[j, s]
+                if i != j:
+                    coef += Rc[j, r] * Rc[i, s]
+                M[p, 7 * c + q] = -coef
+            for r in range(3):
+                coef = Rc[i, r] * tc[j]
+                if i != j:
+                    coef += Rc[j, r] * tc[i]
+                M[6 + r, 7 * c + q] = coef
+        for p, (r, s) in enumerate(_PAIRS):
+            M[p, 7 * c + 6] = float(r == s)
+        M[6:, 7 * c + 6] = -Rc.T @ tc  # the perspective centre
+    return M
 
 
 def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArray, FloatArray]:
@@ -83,39 +142,37 @@ def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArra
     ``(f_j / z_j)^2`` from the previous estimate, so that each squared ray distance is
     measured in pixels at the point's depth: the estimate then minimises (to first
     order) the image error, the maximum-likelihood criterion for pixel noise.
+
+    The sums over rays are one matrix product (see :func:`_odle_matrix`) of 7 numbers
+    per ray: ``(w / m'm) (x^2, xy, x, y^2, y, 1)`` and ``w``.
     """
     C, N = views.seen.shape
-    # Per ray the 6 entries of (I - n n') and the 3 of (I - n n') c, computed once.
-    P = np.empty((C, 9, N))
-    for c, cam in enumerate(views.cameras):
-        R = cam.R
-        n = np.stack([R[0, k] * views.x[c] + R[1, k] * views.y[c] + R[2, k] for k in range(3)])
-        n *= 1.0 / np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-        centre = -R.T @ views.t[c]
-        p = P[c]
-        for i, (r, s) in enumerate(_PAIRS):
-            np.multiply(n[r], n[s], out=p[i])
-            if r == s:
-                np.subtract(1.0, p[i], out=p[i])
-            else:
-                np.negative(p[i], out=p[i])
-        nc = n[0] * centre[0] + n[1] * centre[1] + n[2] * centre[2]
-        for k in range(3):
-            np.multiply(n[k], nc, out=p[6 + k])
-            np.subtract(centre[k], p[6 + k], out=p[6 + k])
-    w = views.weights
-    X, conditioning = _solve(np.einsum("cn,ckn->kn", w, P))
+    x, y, w = views.x, views.y, views.weights
+    Q = np.empty((C, 7, N))
+    wn = x * x
+    wn += y * y
+    wn += 1.0
+    np.divide(w, wn, out=wn)
+    np.multiply(wn, x, out=Q[:, 2])
+    np.multiply(Q[:, 2], x, out=Q[:, 0])
+    np.multiply(Q[:, 2], y, out=Q[:, 1])
+    np.multiply(wn, y, out=Q[:, 4])
+    np.multiply(Q[:, 4], y, out=Q[:, 3])
+    Q[:, 5] = wn
+    Q[:, 6] = w
+    frame = views.frame
+    M = frame.odle_matrix
+    X, conditioning = _solve(M @ Q.reshape(7 * C, N))
     if depth_weighted:
-        R3 = np.stack([cam.R[2] for cam in views.cameras])  # (C, 3)
-        f2 = np.array([views.pixel_scale(c) ** 2 for c in range(C)])[:, None]
-        for _ in range(iterations):
-            z = R3 @ X.T + views.t[:, 2:3]
-            X, conditioning = _solve(np.einsum("cn,ckn->kn", w * f2 / (z * z), P))
+        for k in range(iterations):
+            z = frame.r3 @ X.T
+            z += views.t[:, 2:3]
+            z *= z
+            np.divide(frame.f2, z, out=z)
+            scaled = Q if k == iterations - 1 else np.empty_like(Q)
+            np.multiply(Q, z[:, None, :], out=scaled)
+            X, conditioning = _solve(M @ scaled.reshape(7 * C, N))
     return X, conditioning
-
-
-#: Index pairs of the 6 distinct entries of a symmetric 3x3 matrix, in Normal3's order.
-_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def _solve(entries: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -8,6 +8,8 @@ The estimators (Woltring & Huiskes 1990, Eq. 6-8; Yeadon 1990, Fig. 4) are in
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -16,7 +18,7 @@ from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.geometry import Rig
-from spotlab.reconstruction import _solvers
+from spotlab.reconstruction import _rays, _solvers
 
 __all__ = ["METHODS", "TriangulationResult", "triangulate", "triangulate_points"]
 
@@ -26,7 +28,20 @@ Method = Literal["odle", "dlt", "midpoint"]
 #: The estimators :func:`triangulate` knows.
 METHODS: tuple[str, ...] = ("odle", "dlt", "midpoint")
 
-_BLOCK = 1 << 13  # points per block: temporaries of 64 KiB stay in the CPU cache
+#: Points per chunk undistorted together (per camera, only the seen observations).
+_CHUNK = 1 << 14
+#: Rays (cameras x points) per block of the solvers.
+_BLOCK_RAYS = 1 << 15
+_MIN_BLOCK = 256
+#: Largest default number of worker threads.
+_MAX_WORKERS = 8
+
+
+def _workers(workers: int | None, n_blocks: int) -> int:
+    """Threads to use for ``n_blocks`` blocks: ``workers`` or the CPUs this process may use."""
+    if workers is None:
+        workers = min(len(os.sched_getaffinity(0)), _MAX_WORKERS)
+    return max(1, min(workers, n_blocks))
 
 
 @dataclass(frozen=True)
@@ -71,7 +86,7 @@ def _seen(uv: FloatArray) -> NDArray[np.bool_]:
     return np.isfinite(uv[..., 0]) & np.isfinite(uv[..., 1])
 
 
-def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray]:
+def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray | None]:
     if not isinstance(rig, Rig):
         raise ReconstructionError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
     try:
@@ -88,7 +103,7 @@ def _check(rig: Any, uv: Any, weights: Any) -> tuple[Rig, FloatArray, FloatArray
     if (np.isinf(arr[..., 0]) | np.isinf(arr[..., 1])).any():
         raise ReconstructionError("uv holds infinite values: mark unseen points with NaN")
     if weights is None:
-        w = np.ones(arr.shape[:-1])
+        return rig, arr, None
     else:
         try:
             w = np.broadcast_to(np.asarray(weights, dtype=np.float64), arr.shape[:-1])
@@ -114,6 +129,7 @@ def triangulate_points(
     strict: bool = False,
     min_conditioning: float = 1e-8,
     outlier_px: float = 3.0,
+    workers: int | None = None,
 ) -> TriangulationResult:
     """Triangulate points and report residuals, views, conditioning and outliers.
 
@@ -153,6 +169,10 @@ def triangulate_points(
     outlier_px : float
         A point is flagged as an outlier when one of its rays misses it by more than
         this (px).
+    workers : int, optional
+        Threads that share the points (blocks of about ``16384 / C`` points each).
+        Default: as many as the CPUs this process may use (at most 8). The threads end
+        before the function returns; the result does not depend on their number.
 
     Returns
     -------
@@ -164,10 +184,10 @@ def triangulate_points(
         For ``uv`` of the wrong shape, a camera count that differs from the rig's,
         infinite coordinates, invalid weights, an unknown method, ``"midpoint"`` with
         other than two views of a point, pixels where the distortion has no inverse,
-        or (with ``strict``) points that cannot be reconstructed.
+        ``workers`` below 1, or (with ``strict``) points that cannot be reconstructed.
     """
     X, uv_flat, shape, extra = _triangulate(
-        rig, uv, method, weights, iterations, refine, strict, min_conditioning
+        rig, uv, method, weights, iterations, refine, strict, min_conditioning, workers
     )
     C = len(rig)
     projected = np.stack([cam.project(X) for cam in rig])
@@ -200,12 +220,13 @@ def triangulate(
     refine: int = 0,
     strict: bool = False,
     min_conditioning: float = 1e-8,
+    workers: int | None = None,
 ) -> FloatArray:
     """World points from their images in several calibrated cameras.
 
     Parameters
     ----------
-    rig, uv, method, weights, iterations, refine, strict, min_conditioning
+    rig, uv, method, weights, iterations, refine, strict, min_conditioning, workers
         As in :func:`triangulate_points`.
 
     Returns
@@ -233,7 +254,7 @@ def triangulate(
     (True, True)
     """
     X, _, shape, _ = _triangulate(
-        rig, uv, method, weights, iterations, refine, strict, min_conditioning
+        rig, uv, method, weights, iterations, refine, strict, min_conditioning, workers
     )
     return X.reshape(*shape, 3)
 
@@ -247,6 +268,7 @@ def _triangulate(
     refine: int,
     strict: bool,
     min_conditioning: float,
+    workers: int | None,
 ) -> tuple[FloatArray, FloatArray, tuple[int, ...], tuple[Any, FloatArray, Any]]:
     if method not in METHODS:
         raise ReconstructionError(f"unknown triangulation method {method!r}: choose from {METHODS}")
@@ -254,6 +276,10 @@ def _triangulate(
         raise ReconstructionError(f"iterations must be >= 0, got {iterations}")
     if refine < 0:
         raise ReconstructionError(f"refine must be >= 0, got {refine}")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1
+    ):
+        raise ReconstructionError(f"workers must be an integer >= 1 or None, got {workers!r}")
     rig, arr, w = _check(rig, uv, weights)
     C = len(rig)
     shape = arr.shape[1:-1]
@@ -272,21 +298,38 @@ def _triangulate(
                 f"the midpoint method takes exactly two views per point; {int(many.sum())} "
                 f"points are seen by up to {int(n_views.max())} cameras (use 'odle' or 'dlt')"
             )
-    w = w.reshape(C, -1)
+    w_flat = None if w is None else w.reshape(C, -1)
     N = flat.shape[1]
     X = np.empty((N, 3))
     conditioning = np.empty(N)
     origin = np.mean([cam.center for cam in rig], axis=0)
-    # Blocks of points small enough for the temporaries to stay in the CPU cache.
-    for start in range(0, N, _BLOCK):
-        block = slice(start, start + _BLOCK)
-        views = _solvers.Views.build(
-            rig.cameras, origin, flat[:, block], seen[:, block], w[:, block]
-        )
+    frame = _solvers.Frame(rig.cameras, origin)
+    # Chunks of points whose undistorted coordinates stay in the CPU cache, solved in
+    # blocks whose temporaries do too.
+    chunks = [slice(start, start + _CHUNK) for start in range(0, N, _CHUNK)]
+    size = max(_MIN_BLOCK, _BLOCK_RAYS // C)
+
+    def run(chunk: slice) -> None:
         with np.errstate(divide="ignore", invalid="ignore"):  # unseen points: masked below
-            X[block], conditioning[block] = _estimate(
-                views, flat[:, block], method, iterations, refine
-            )
+            x, y = _rays.normalize_seen(frame.lenses, flat[:, chunk], seen[:, chunk])
+            for start in range(0, x.shape[1], size):
+                b = slice(start, start + size)
+                g = slice(chunk.start + start, chunk.start + start + x[:, b].shape[1])
+                views = _solvers.Views.build(
+                    frame, x[:, b], y[:, b], seen[:, g], None if w_flat is None else w_flat[:, g]
+                )
+                X[g], conditioning[g] = _estimate(views, flat[:, g], method, iterations, refine)
+
+    n_workers = _workers(workers, len(chunks))
+    if n_workers == 1:
+        for chunk in chunks:
+            run(chunk)
+    else:
+        # Threads share the blocks (numpy releases the GIL in its loops); each writes its
+        # own rows of X. The pool is joined before returning: no thread outlives the call.
+        with ThreadPoolExecutor(n_workers, thread_name_prefix="spotlab-triangulate") as pool:
+            for future in [pool.submit(run, chunk) for chunk in chunks]:
+                future.result()
     ill = ~few & ~(conditioning >= min_conditioning)
     if strict and ill.any():
         raise ReconstructionError(
