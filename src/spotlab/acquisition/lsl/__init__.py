@@ -4,6 +4,7 @@ Needs the ``lsl`` extra (``pip install 'spotlab[lsl]'``); nothing here opens a
 network port until an outlet is created. See docs/lsl.md.
 """
 
+from spotlab.acquisition.lsl._pylsl import configure
 from spotlab.acquisition.lsl.clock import LslClock
 from spotlab.acquisition.lsl.metadata import (
     MOCAP_TYPE,
@@ -23,6 +24,7 @@ __all__ = [
     "LslOutletSink",
     "MarkerOutlet",
     "TimeOf",
+    "configure",
     "marker_labels",
     "marker_spec",
     "spec_from_info",
