@@ -16,6 +16,7 @@ from spotlab.drivers.base import DeviceInfo, Driver
 
 DRIVERS: dict[str, tuple[str, str]] = {
     "selspot": ("spotlab.drivers.selspot", "SelspotDriver"),
+    "timer": ("spotlab.drivers.timer", "TimerDriver"),
     "lsl": ("spotlab.drivers.lsl", "LslInletDriver"),
 }
 

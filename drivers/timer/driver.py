@@ -1,0 +1,164 @@
+"""The TMR timer/sync unit driver (timer.md §7): the MCS-1 state machine with the timer's set-up.
+
+:class:`TimerDriver` resets, negotiates, checks ``VER:0`` (``TMR``, enough
+inputs, 10 MHz counter), sends ``RATE``, ``EDGS``, ``TCOD`` and one ``ARM`` per
+input, and starts the stream; recovery is :class:`Mcs1Driver`'s. :meth:`pulse`
+fires an output while streaming and returns the counter at the pulse.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from typing import Any
+
+from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.streams import StreamSpec
+from spotlab.drivers.base import DeviceInfo
+from spotlab.drivers.mcs1.commands import Reply
+from spotlab.drivers.mcs1.driver import Mcs1Driver
+from spotlab.drivers.timer.config import MAX_INPUTS, TimerConfig
+from spotlab.drivers.timer.protocol import (
+    FAMILY_CODE,
+    TICK_HZ,
+    UNITS,
+    VALUES,
+    TimerDecoder,
+    TimerVersion,
+    parse_version,
+)
+
+
+class TimerDriver(Mcs1Driver):
+    """Driver of a TMR timer/sync unit.
+
+    Parameters
+    ----------
+    port : str or path-like
+        Device path or pyserial URL (``sim://timer?...``).
+    name : str, optional
+        Stream name; ``"timer"`` by default.
+    rate_hz : float
+        Timer frame rate in Hz (default 100).
+    slots : int
+        Edge record slots per frame (default 8).
+    inputs : mapping of int to str, optional
+        Input -> ``"rising"``, ``"falling"``, ``"both"`` or ``"off"``; default
+        every input armed for rising edges (frame pulses rise at frame start).
+    timecode : (int, bool), optional
+        ``(fps, drop_frame)`` to have LTC labels in every frame.
+    baud : int or "auto"
+        Line rate while streaming.
+    reply_timeout, reconnect_timeout : float
+        As :class:`~spotlab.drivers.mcs1.driver.Mcs1Driver`.
+
+    Raises
+    ------
+    ConfigurationError
+        If the configuration is out of range.
+    BandwidthError
+        If the stream does not fit ``baud``.
+    """
+
+    family = "timer"
+    family_code = FAMILY_CODE
+    config: TimerConfig
+    _decoder: TimerDecoder
+
+    def __init__(
+        self,
+        port: str | os.PathLike[str],
+        *,
+        name: str | None = None,
+        rate_hz: float = 100.0,
+        slots: int = 8,
+        inputs: Mapping[int, str] | None = None,
+        timecode: tuple[int, bool] | None = None,
+        baud: int | str = 2_000_000,
+        reply_timeout: float = 1.0,
+        reconnect_timeout: float | None = None,
+    ) -> None:
+        super().__init__(port, name=name)
+        self.config = TimerConfig.create(
+            rate_hz=rate_hz, slots=slots, inputs=inputs, timecode=timecode, baud=baud
+        )
+        #: What the unit said of itself (``VER:0``), once started.
+        self.device: TimerVersion | None = None
+        self._setup(
+            self.config,
+            TimerDecoder.from_config(self.config, stats=self.stats),
+            reply_timeout,
+            reconnect_timeout,
+        )
+
+    @property
+    def spec(self) -> StreamSpec:
+        """The stream: ``timer``, ``E + 1`` rows (edge slots, then timecode), 10 MHz ticks."""
+        c = self.config
+        return StreamSpec(
+            name=self.name,
+            kind="timer",
+            n_sensors=1,
+            n_markers=c.slots + 1,
+            rate_hz=c.rate_hz,
+            tick_hz=float(TICK_HZ),
+            slot_period_s=None,
+            values=VALUES,
+            units=UNITS,
+            metadata={"config": c.to_dict(), "layout": "timer-edges-v1"},
+        )
+
+    def metadata(self) -> dict[str, Any]:
+        """Everything a recording needs to decode this stream again."""
+        return {
+            **super().metadata(),
+            "config": self.config.to_dict(),
+            "device": None if self.device is None else self.device.to_dict(),
+            "protocol": {"transport": "MCS-1", "family_code": FAMILY_CODE, "version": 1},
+            "decoder": "spotlab.drivers.timer:decoder_from_metadata",
+        }
+
+    @property
+    def decoder(self) -> TimerDecoder:
+        """The decoder fed by this driver (its ``stats`` are the driver's)."""
+        return self._decoder
+
+    def pulse(self, output: int) -> int:
+        """Fire one pulse on ``output`` (0-3); returns the counter at the pulse (10 MHz ticks).
+
+        Raises
+        ------
+        ProtocolError
+            If the reply does not carry the pulse's tick.
+        """
+        reply = self.command(f"PULS:{int(output)}")
+        fields = reply.text.split()
+        if len(fields) != 2 or fields[0] != "PULS":
+            raise ProtocolError(f"reply {reply.text!r} to PULS is not 'PULS <16 hex digits>'")
+        value = int(fields[1], 16)
+        return value - (1 << 64) if value >= 1 << 63 else value
+
+    # -- family hooks ----------------------------------------------------------------
+    def _check_device(self, reply: Reply) -> None:
+        self.device = parse_version(reply.text)
+        if self.device.inputs < MAX_INPUTS or self.device.tick_hz != TICK_HZ:
+            raise ConfigurationError(
+                f"the unit on {self.port} ({reply.text}) has {self.device.inputs} inputs and a "
+                f"{self.device.tick_hz} Hz counter; this driver needs {MAX_INPUTS} inputs and "
+                f"{TICK_HZ} Hz"
+            )
+
+    def _describe_load(self) -> str:
+        c = self.config
+        return f"timer frames of {c.slots} edge slots at {c.rate_hz:g} Hz"
+
+    @classmethod
+    def _device_info(cls, port: str, text: str) -> DeviceInfo:
+        version = parse_version(text)
+        return DeviceInfo(
+            family=cls.family,
+            port=port,
+            description=version.text,
+            serial_number=version.serial_number,
+            extra={"firmware": version.firmware, "inputs": version.inputs},
+        )
