@@ -4,6 +4,7 @@ the noise level, C3D and TRC out, summary and JSON; every bad input is one clear
 from __future__ import annotations
 
 import csv
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +13,12 @@ import numpy as np
 import pytest
 
 from spotlab.console.cli import main
+from spotlab.console.errors import CommandError
+from spotlab.console.marker_observations import MarkerObservations
+from spotlab.console.progress import Progress
+from spotlab.console.recorded_observations import SelspotRecording, frame_numbers
+from spotlab.console.trajectories import reconstruct
+from spotlab.geometry import Rig
 from spotlab.io import read_c3d, read_trc
 from spotlab.simulators.rigs import ring_rig
 
@@ -183,3 +190,30 @@ def test_bad_input_is_one_clear_line(
     assert code != 0
     assert message in _one_error_line(capsys)
     assert not (tmp_path / out).exists()
+
+
+def test_progress_is_shown_per_chunk_of_frames(scene: Scene) -> None:
+    stream = io.StringIO()
+    progress = Progress("reconstructing", total=F, stream=stream, force=True)
+    obs = MarkerObservations(scene.uv, rate_hz=100.0)
+    result = reconstruct(Rig.load(scene.rig), obs, progress=progress)
+    assert f"{F} of {F} frames" in stream.getvalue() and stream.getvalue().endswith("\n")
+    assert result.trial.n_frames == F
+
+
+def _recording(ticks: list[int]) -> SelspotRecording:
+    n = len(ticks)
+    data = np.full((n, 1, 2, 3), 2000.0)
+    return SelspotRecording(data, np.ones((n, 1, 2), np.uint8), np.array(ticks), 200.0, 1e6)
+
+
+def test_recorded_frames_keep_their_place_and_lost_ones_are_gaps() -> None:
+    # 200 Hz, µs ticks: the third and fourth frames were lost on the link.
+    placed = frame_numbers(_recording([1000, 6001, 20999, 26000]), Path("r.spj"))
+    assert placed.tolist() == [0, 1, 4, 5]
+    with pytest.raises(CommandError, match="go backwards or repeat"):
+        frame_numbers(_recording([1000, 6000, 6000]), Path("r.spj"))
+    recording = _recording([0, 5000])
+    recording.rate_hz = float("nan")
+    with pytest.raises(CommandError, match="does not state its frame and tick rates"):
+        frame_numbers(recording, Path("r.spj"))
