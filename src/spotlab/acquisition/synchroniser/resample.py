@@ -18,6 +18,9 @@ B = npt.NDArray[np.bool_]
 
 __all__ = ["Resampled", "resample"]
 
+#: Samples plus instants times channels per block of markers.
+_BLOCK = 1 << 20
+
 
 @dataclass(frozen=True)
 class Resampled:
@@ -129,6 +132,23 @@ def resample(
 
     k = int(np.prod(trailing))
     y3 = y.reshape(f, m, k)
+    values = np.empty((u.size, m, k))
+    flags = np.empty((u.size, m, k), dtype=np.uint8)
+    # Markers in blocks, so that the work arrays stay at a few tens of MB.
+    step = max(1, _BLOCK // max(1, (f + u.size) * k))
+    for m0 in range(0, m, step):
+        block = slice(m0, min(m, m0 + step))
+        values[:, block], flags[:, block] = _resample_block(x, gaps, y3[:, block], u, off[block])
+    return Resampled(
+        values=values.reshape(u.size, m, *trailing),
+        flags=flags.reshape(u.size, m, *trailing),
+        frame_gaps=gaps,
+    )
+
+
+def _resample_block(x: F64, gaps: U8, y3: F64, u: F64, off: F64) -> tuple[F64, U8]:
+    """Values (T, M, K) and flags of markers ``y3`` (F, M, K) at instants ``u`` (T,)."""
+    f, m, k = y3.shape
     present = np.isfinite(y3)
     pair = present[:-1] & present[1:]  # (F-1, M, K)
     usable = pair & (gaps == 0)[:, None, None]
@@ -154,9 +174,4 @@ def resample(
     flags: U8 = np.where(outside[:, :, None], OUTSIDE, inside).astype(np.uint8)
     yz = np.where(present, y3, 0.0)
     out = _spline.hermite(at(yz, ii), at(yz, ii + 1), at(slope, ii), at(slope, ii + 1), h, w)
-    out = np.where(flags == 0, out, np.nan)
-    return Resampled(
-        values=out.reshape(u.size, m, *trailing),
-        flags=flags.reshape(u.size, m, *trailing),
-        frame_gaps=gaps,
-    )
+    return np.where(flags == 0, out, np.nan), flags

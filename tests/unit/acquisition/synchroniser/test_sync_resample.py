@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
@@ -170,3 +172,18 @@ def test_bad_input_raises_a_named_error(kwargs: dict[str, object], match: str) -
     args.update(kwargs)
     with pytest.raises(SynchronisationError, match=match):
         resample(**args)  # type: ignore[arg-type]
+
+
+def test_markers_in_blocks_give_the_same_result(monkeypatch: pytest.MonkeyPatch) -> None:
+    module = importlib.import_module("spotlab.acquisition.synchroniser.resample")
+
+    t = irregular_times(30, seed=4)
+    y = np.random.default_rng(4).normal(size=(30, 7, 2, 3))
+    y[10:14, 2, 1] = np.nan
+    off = np.linspace(0.0, 0.005, 7)
+    u = np.linspace(t[0], t[-1] + 0.01, 90)
+    whole = resample(t, y, u, offsets=off)
+    monkeypatch.setattr(module, "_BLOCK", 1)  # one marker per block
+    blocks = resample(t, y, u, offsets=off)
+    assert_array_equal(blocks.flags, whole.flags)
+    assert_array_equal(blocks.values, whole.values)
