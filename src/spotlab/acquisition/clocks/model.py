@@ -219,6 +219,26 @@ class ClockModel:
         back = np.concatenate([[0], np.cumsum(np.diff(tk) < 0)]) if tk.size else tk
         return np.asarray(start + back, dtype=np.int64)
 
+    def _boundaries(self, members: npt.NDArray[np.intp]) -> I64:
+        """First tick each segment of one epoch owns, shape (S,).
+
+        Between two segments the boundary lies in the gap of ticks between their fitted
+        ranges: at the mean of the ticks the two segments assign to the middle of the
+        gap in session time. A tick jump far larger than the gap (a wrap, a big step)
+        is thereby split correctly however long the gap is.
+        """
+        segs = [self.segments[i] for i in members]
+        out = np.empty(len(segs), dtype=np.int64)
+        out[0] = segs[0].tick_start
+        for j in range(1, len(segs)):
+            prev, nxt = segs[j - 1], segs[j]
+            t_end = float(prev.seconds(np.array([prev.tick_end]))[0])
+            t_start = float(nxt.seconds(np.array([nxt.tick_start]))[0])
+            t_mid = np.array([0.5 * (t_end + t_start)])
+            mid = 0.5 * (float(prev.ticks(t_mid)[0]) + float(nxt.ticks(t_mid)[0]))
+            out[j] = int(np.clip(math.ceil(mid), prev.tick_end + 1, nxt.tick_start))
+        return out
+
     def _segment_index(self, ticks: I64, epoch: I64) -> npt.NDArray[np.intp]:
         idx = np.empty(ticks.shape, dtype=np.intp)
         ep = np.array([s.epoch for s in self.segments])
@@ -226,7 +246,7 @@ class ClockModel:
             members = np.flatnonzero(ep == e)
             if members.size == 0:
                 raise ClockError(f"the clock model has no segment in epoch {int(e)}")
-            starts = np.array([self.segments[i].tick_start for i in members], dtype=np.int64)
+            starts = self._boundaries(members)
             sel = epoch == e
             pos = np.searchsorted(starts, ticks[sel], side="right") - 1
             idx[sel] = members[np.clip(pos, 0, members.size - 1)]

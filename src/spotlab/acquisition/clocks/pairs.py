@@ -64,13 +64,17 @@ def _first_bad(values: npt.NDArray[np.generic]) -> int:
     return int(np.flatnonzero(~np.isfinite(values.astype(np.float64)))[0])
 
 
-def _segments_of(ticks: I64, ref: F64, k: float, window: int, min_step_s: float) -> list[int]:
+def _segments_of(
+    ticks: I64, ref: F64, k: float, window: int, min_step_s: float, floor_s: float
+) -> list[int]:
     """Start indices of the segments of one epoch (always begins with 0)."""
     starts = [0]
     pending = [(0, ticks.size)]
     while pending:
         lo, hi = pending.pop()
-        found = find_steps(ticks[lo:hi], ref[lo:hi], k=k, window=window, min_step_s=min_step_s)
+        found = find_steps(
+            ticks[lo:hi], ref[lo:hi], k=k, window=window, min_step_s=min_step_s, floor_s=floor_s
+        )
         for i in found:
             starts.append(lo + i)
         cuts = [lo, *(lo + i for i in found), hi]
@@ -179,7 +183,7 @@ def fit_pairs(
                 f"epoch {epoch} (pairs {lo}..{hi - 1}) has {hi - lo} pairs; a clock fit needs "
                 f"at least {MIN_PAIRS}"
             )
-        starts = [lo + s for s in _segments_of(tk[lo:hi], ref[lo:hi], k, window, min_step_s)]
+        starts = [lo + s for s in _segments_of(tk[lo:hi], ref[lo:hi], k, window, min_step_s, floor)]
         for a, b in zip(starts, [*starts[1:], hi], strict=True):
             fit = fit_line(tk[a:b], ref[a:b], floor_s=floor)
             residuals[a:b] = fit.residuals

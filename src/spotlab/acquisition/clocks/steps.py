@@ -5,8 +5,8 @@ For each boundary b between pairs b - 1 and b, the statistic is
 .. math:: s_b = \operatorname{med}(r_b, \dots, r_{b+w-1})
               - \operatorname{med}(r_{b-w}, \dots, r_{b-1}),
 
-with r the residuals of the pairs about a line of the median pairwise rate (robust to
-the steps themselves). A boundary is a step where :math:`|s_b| > \max(k \sigma,
+with r the residuals of the pairs about a line of the median rate over pairs N/8 apart
+(robust to a few steps). A boundary is a step where :math:`|s_b| > \max(k \sigma,
 s_{min})`, :math:`\sigma` the jitter estimated from first differences of r (robust SD
 divided by sqrt 2). Medians make a single outlier (one late edge) invisible; a run of
 boundaries above threshold is one step, placed at the largest single jump in the run.
@@ -24,10 +24,18 @@ I64 = npt.NDArray[np.int64]
 F64 = npt.NDArray[np.float64]
 
 
-def median_rate(ticks: I64, ref_s: F64) -> float:
-    """Median of the pairwise rates ``diff(ref) / diff(ticks)``, s per tick, shape (N,) each."""
-    dt = np.diff(ticks).astype(np.float64)
-    return float(np.median(np.diff(ref_s) / dt))
+def median_rate(ticks: I64, ref_s: F64, lag: int | None = None) -> float:
+    """Median rate over pairs ``lag`` apart, s per tick; inputs shape (N,).
+
+    Rates between neighbours are quantised by the tick (one tick in a 10 ms frame is
+    100 ppm); over ``lag`` pairs (default N // 8) the quantisation shrinks ``lag`` times,
+    while only the pairs that straddle a step (a fraction ``lag / N`` per step) are
+    spoiled, which the median ignores.
+    """
+    n = ticks.size
+    lag = max(1, n // 8) if lag is None else max(1, min(int(lag), n - 1))
+    dt = (ticks[lag:] - ticks[:-lag]).astype(np.float64)
+    return float(np.median((ref_s[lag:] - ref_s[:-lag]) / dt))
 
 
 def difference_jitter(residuals: F64) -> float:
@@ -43,6 +51,7 @@ def find_steps(
     window: int = 16,
     min_side: int = 3,
     min_step_s: float = 0.0,
+    floor_s: float = 0.0,
 ) -> list[int]:
     """Indices where a new clock segment starts (steps between pair i - 1 and i).
 
@@ -61,6 +70,9 @@ def find_steps(
         either end are not detected (the robust line fit treats those pairs as outliers).
     min_step_s : float
         Smallest step reported, s.
+    floor_s : float
+        Smallest jitter assumed, s (the tick rounding SD: with exact data the measured
+        jitter can be 0, which would make every boundary a step).
 
     Returns
     -------
@@ -73,7 +85,7 @@ def find_steps(
     rate = median_rate(ticks, ref_s)
     r = ref_s - ref_s[0] - rate * (ticks - ticks[0]).astype(np.float64)
     sigma = difference_jitter(r)
-    threshold = max(k * sigma, min_step_s, 1e-15)
+    threshold = max(k * max(sigma, floor_s), min_step_s, 1e-15)
     w = max(1, min(window, n // 2))
     pad = np.full(w, np.nan)
     padded = np.concatenate([pad, r, pad])

@@ -73,10 +73,16 @@ class SyntheticClock:
         return np.asarray(out, dtype=np.int64)
 
 
-def frame_times(n: int, rate_hz: float, start_s: float = 0.5, seed: int = 0) -> F64:
-    """True times of n frames at ``rate_hz`` from ``start_s``, with a random phase, shape (n,)."""
+def frame_times(
+    n: int, rate_hz: float, start_s: float = 0.5, seed: int = 0, jitter_s: float = 0.0
+) -> F64:
+    """True times of n frames at ``rate_hz`` from ``start_s``, shape (n,).
+
+    A random phase, plus Gaussian trigger jitter of ``jitter_s`` RMS per frame.
+    """
     rng = np.random.default_rng(seed)
-    return np.asarray(start_s + rng.uniform(0.0, 1.0 / rate_hz) + np.arange(n) / rate_hz)
+    t = start_s + rng.uniform(0.0, 1.0 / rate_hz) + np.arange(n) / rate_hz
+    return np.asarray(t + rng.normal(0.0, jitter_s, n) if jitter_s > 0 else t)
 
 
 def timer_reference(t: npt.ArrayLike, resolution_s: float = 1e-7) -> F64:
