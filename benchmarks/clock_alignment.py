@@ -6,9 +6,10 @@ reference is the truth's own clock), the drift the model reports (ppm), the even
 found, and the fit time (s). Target (TARGETS.md): within 50 µs of the truth for drift
 up to +-500 ppm, steps, counter wraps and jitter, after synchronisation by timer edges.
 
-Scenarios: 60 s at 100 Hz with 2 µs RMS frame trigger jitter, device clock of 1 MHz; timer reference of 0.1 µs; arrival
-stamps with 0.2 ms latency plus 1 ms mean exponential queueing; probes as liblsl
-(8 every 2 s) with one-way delays of 100 µs + exp(200 µs) up and 300 µs + exp(200 µs)
+Scenarios: 60 s at 100 Hz with 2 µs RMS frame trigger jitter, device clock of 1 MHz;
+timer reference of 0.1 µs; arrival stamps with 0.2 ms latency plus 1 ms mean
+exponential queueing; probes as liblsl (8 every 2 s) with one-way delays of
+100 µs + exp(200 µs) up and 300 µs + exp(200 µs)
 down (asymmetric by 200 µs).
 
 Usage: ``python benchmarks/clock_alignment.py [--seconds 60] [--rate 100] [--jitter 2e-6]``
@@ -60,6 +61,49 @@ def errors(
     }
 
 
+Fitted = Callable[[np.ndarray], np.ndarray]
+
+
+def fitters(
+    clock: SyntheticClock, truth: np.ndarray, ticks: np.ndarray, ref: np.ndarray, seconds: float
+) -> list[tuple[str, Callable[[], Fitted]]]:
+    """(method, fit) for each fitting method on one scenario."""
+    resets = bool(clock.resets)
+    n = ticks.size
+
+    def edges() -> ClockModel:
+        return fit_edges(ticks, ref, clock.tick_hz, allow_resets=resets)
+
+    def online() -> ClockModel:
+        est = EdgeClockEstimator(clock.tick_hz, allow_resets=resets)
+        for lo in range(0, n, 50):
+            est.update(ticks[lo : lo + 50], ref[lo : lo + 50])
+        return est.model
+
+    def refined() -> Fitted:
+        return refine_model(edges(), ticks, ref, ref_resolution_s=1e-7)
+
+    def arrivals() -> ClockModel:
+        arr = arrival_times(truth, seed=2)
+        return dejitter_arrivals(ticks, arr, clock.tick_hz, allow_resets=resets).model
+
+    def probes() -> ClockModel:
+        log = probe_exchanges(
+            clock, seconds, up_s=(100e-6, 200e-6), down_s=(300e-6, 200e-6), seed=3
+        )
+        return fit_probes(
+            log.t0_s, log.t1_ticks, log.t2_ticks, log.t3_s, clock.tick_hz, allow_resets=resets
+        )
+
+    return [
+        ("edges", edges),
+        ("edges-online", online),
+        ("edges+spline", refined),
+        ("arrivals", arrivals),
+        ("probes", probes),
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0)
@@ -70,46 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, clock in SCENARIOS.items():
         truth = frame_times(n, args.rate, seed=1, jitter_s=args.jitter)
         ticks = clock.ticks(truth)
-        resets = bool(clock.resets)
         ref = timer_reference(truth)
-        rows: list[tuple[str, Callable[[], Callable[[np.ndarray], np.ndarray]]]] = []
-
-        def edges() -> ClockModel:
-            return fit_edges(ticks, ref, clock.tick_hz, allow_resets=resets)
-
-        def online() -> ClockModel:
-            est = EdgeClockEstimator(clock.tick_hz, allow_resets=resets)
-            for lo in range(0, n, 50):
-                est.update(ticks[lo : lo + 50], ref[lo : lo + 50])
-            return est.model
-
-        def refined() -> Callable[[np.ndarray], np.ndarray]:
-            return refine_model(edges(), ticks, ref, ref_resolution_s=1e-7)
-
-        def arrivals() -> ClockModel:
-            arr = arrival_times(truth, seed=2)
-            return dejitter_arrivals(ticks, arr, clock.tick_hz, allow_resets=resets).model
-
-        def probes() -> ClockModel:
-            log = probe_exchanges(
-                clock, args.seconds, up_s=(100e-6, 200e-6), down_s=(300e-6, 200e-6), seed=3
-            )
-            return fit_probes(
-                log.t0_s,
-                log.t1_ticks,
-                log.t2_ticks,
-                log.t3_s,
-                clock.tick_hz,
-                allow_resets=resets,
-            )
-
-        rows = [
-            ("edges", edges),
-            ("edges-online", online),
-            ("edges+spline", refined),
-            ("arrivals", arrivals),
-            ("probes", probes),
-        ]
+        rows = fitters(clock, truth, ticks, ref, args.seconds)
         for method, fit in rows:
             start = time.perf_counter()
             try:
