@@ -24,8 +24,6 @@ Splines, ch. IV), written here for runs that start and stop anywhere.
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
-
 import numpy as np
 import numpy.typing as npt
 from scipy.linalg import solve_banded
@@ -35,29 +33,18 @@ from spotlab.acquisition.synchroniser.gaps import valid_runs
 F64 = npt.NDArray[np.float64]
 B = npt.NDArray[np.bool_]
 
-_A = TypeVar("_A", bound=npt.NDArray[Any])
-
 #: Unknowns per banded solve (bounds the work memory to a few tens of MB).
 _CHUNK = 1 << 20
 
 
-def _shift(a: _A, k: int, fill: float) -> _A:
-    """``a`` moved by ``k`` rows (``out[i] = a[i - k]``), ``fill`` where nothing moved in."""
-    out = np.full_like(a, fill)
-    if k > 0:
-        out[k:] = a[:-k]
-    elif k < 0:
-        out[:k] = a[-k:]
-    else:
-        out[:] = a
-    return out
-
-
 def run_nodes(usable: B) -> npt.NDArray[np.int64]:
-    """Samples in the run each usable interval belongs to, 0 for unusable ones (F - 1, C)."""
-    n, c = usable.shape
+    """Samples in the run each usable interval belongs to, 0 for unusable ones.
+
+    ``usable`` and the result have shape (C, F - 1): channels along the first axis.
+    """
+    c, n = usable.shape
     out = np.zeros((c, n), dtype=np.int64)
-    runs = valid_runs(usable)
+    runs = valid_runs(usable.T)
     if runs.size:
         lengths = runs[:, 2] - runs[:, 1]
         flat_start = runs[:, 0] * n + runs[:, 1]
@@ -65,7 +52,7 @@ def run_nodes(usable: B) -> npt.NDArray[np.int64]:
             lengths.sum()
         )
         out.ravel()[idx] = np.repeat(lengths + 1, lengths)
-    return out.T
+    return out
 
 
 def slopes(x: F64, y: F64, usable: B) -> F64:
@@ -86,69 +73,68 @@ def slopes(x: F64, y: F64, usable: B) -> F64:
         dy/dx at each sample, 0 at samples in no run.
     """
     f, c = y.shape
-    h = np.diff(x)[:, None]  # (F-1, 1)
-    d = np.where(usable, np.diff(np.where(np.isfinite(y), y, 0.0), axis=0) / h, 0.0)
-    nodes = run_nodes(usable)
-    left = np.zeros((f, c), dtype=bool)
-    right = np.zeros((f, c), dtype=bool)
-    left[1:] = usable
-    right[:-1] = usable
-    # h_{i-2}, h_{i-1}, h_i, h_{i+1} and d likewise on the rows of the samples, (F, .).
-    hp0 = np.vstack([h, [[1.0]]])
-    hm2, hm1, hp1 = _shift(hp0, 2, 1.0), _shift(hp0, 1, 1.0), _shift(hp0, -1, 1.0)
-    dp0 = np.vstack([d, np.zeros((1, c))])
-    dm1, dp1 = _shift(dp0, 1, 0.0), _shift(dp0, -1, 0.0)
-    dm2 = _shift(dm1, 1, 0.0)
-    n_right = np.vstack([nodes, np.zeros((1, c), dtype=np.int64)])
-    n_left = _shift(n_right, 1, 0)
+    h = np.diff(x)
+    # Channel-major (C, F): each channel's equations are consecutive rows of one system.
+    ok = np.ascontiguousarray(usable.T)
+    d = np.where(ok, np.diff(np.where(np.isfinite(y), y, 0.0).T, axis=1) / h, 0.0)
+    nodes = run_nodes(ok)
+    diag = np.ones((c, f))
+    upper = np.zeros((c, f))  # coefficient of s_{i+1} in row i
+    lower = np.zeros((c, f))  # coefficient of s_{i-1} in row i
+    rhs = np.zeros((c, f))
 
-    diag = np.ones((f, c))
-    upper = np.zeros((f, c))  # coefficient of s_{i+1} in row i
-    lower = np.zeros((f, c))  # coefficient of s_{i-1} in row i
-    rhs = np.zeros((f, c))
+    # Inside a run (samples 1 .. F-2 with both intervals usable): most rows.
+    inner = ok[:, :-1] & ok[:, 1:]
+    hm, hp = h[:-1], h[1:]  # h_{i-1}, h_i
+    diag[:, 1:-1] = np.where(inner, 2.0 * (hm + hp), 1.0)
+    upper[:, 1:-1] = np.where(inner, hm, 0.0)
+    lower[:, 1:-1] = np.where(inner, hp, 0.0)
+    rhs[:, 1:-1] = np.where(inner, 3.0 * (hp * d[:, :-1] + hm * d[:, 1:]), 0.0)
 
-    def put(mask: B, lo: F64 | float, di: F64 | float, up: F64 | float, b: F64) -> None:
-        lower[mask] = np.broadcast_to(lo, (f, c))[mask]
-        diag[mask] = np.broadcast_to(di, (f, c))[mask]
-        upper[mask] = np.broadcast_to(up, (f, c))[mask]
-        rhs[mask] = np.broadcast_to(b, (f, c))[mask]
-
-    inner = left & right
-    put(inner, hp0, 2.0 * (hm1 + hp0), hm1, 3.0 * (hp0 * dm1 + hm1 * dp0))
-    start = right & ~left
-    put(start & (n_right == 2), 0.0, 2.0, 1.0, 3.0 * dp0)
-    put(start & (n_right == 3), 0.0, 1.0, 0.0, dp0 - (dp1 - dp0) * hp0 / (hp0 + hp1))
-    s = hp0 + hp1
-    put(
-        start & (n_right >= 4),
-        0.0,
-        hp1,
-        s,
-        ((hp0 + 2.0 * s) * hp1 * dp0 + hp0**2 * dp1) / s,
+    # First sample of each run: interval i usable, interval i - 1 not.
+    before = np.zeros_like(ok)
+    before[:, 1:] = ok[:, :-1]
+    ch, i = np.nonzero(ok & ~before)
+    n_run = nodes[ch, i]
+    j = np.minimum(i + 1, f - 2)
+    h0, h1, d0, d1 = h[i], h[j], d[ch, i], d[ch, j]
+    cases = [n_run == 2, n_run == 3]
+    s = h0 + h1
+    diag[ch, i] = np.select(cases, [2.0, 1.0], h1)
+    upper[ch, i] = np.select(cases, [1.0, 0.0], s)
+    rhs[ch, i] = np.select(
+        cases,
+        [3.0 * d0, d0 - (d1 - d0) * h0 / s],
+        ((h0 + 2.0 * s) * h1 * d0 + h0**2 * d1) / s,
     )
-    end = left & ~right
-    put(end & (n_left == 2), 1.0, 2.0, 0.0, 3.0 * dm1)
-    put(end & (n_left == 3), 0.0, 1.0, 0.0, dm1 + (dm1 - dm2) * hm1 / (hm1 + hm2))
-    s = hm1 + hm2
-    put(
-        end & (n_left >= 4),
-        s,
-        hm2,
-        0.0,
-        (hm1**2 * dm2 + (2.0 * s + hm1) * hm2 * dm1) / s,
+
+    # Last sample of each run: sample k + 1 after its last usable interval k.
+    after = np.zeros_like(ok)
+    after[:, :-1] = ok[:, 1:]
+    ch, k = np.nonzero(ok & ~after)
+    n_run = nodes[ch, k]
+    j = np.maximum(k - 1, 0)
+    ha, hb, da, db = h[k], h[j], d[ch, k], d[ch, j]  # h_{e-1}, h_{e-2}, d_{e-1}, d_{e-2}
+    cases = [n_run == 2, n_run == 3]
+    s = ha + hb
+    lower[ch, k + 1] = np.select(cases, [1.0, 0.0], s)
+    diag[ch, k + 1] = np.select(cases, [2.0, 1.0], hb)
+    rhs[ch, k + 1] = np.select(
+        cases,
+        [3.0 * da, da + (da - db) * ha / s],
+        (ha**2 * db + (2.0 * s + ha) * hb * da) / s,
     )
 
     out = np.empty((c, f))
-    lo_t, di_t, up_t, b_t = lower.T, diag.T, upper.T, rhs.T
     step = max(1, _CHUNK // f)
     for c0 in range(0, c, step):
         c1 = min(c, c0 + step)
         n = (c1 - c0) * f
         ab = np.zeros((3, n))
-        ab[0, 1:] = up_t[c0:c1].ravel()[:-1]
-        ab[1] = di_t[c0:c1].ravel()
-        ab[2, :-1] = lo_t[c0:c1].ravel()[1:]
-        out[c0:c1] = solve_banded((1, 1), ab, b_t[c0:c1].ravel()).reshape(c1 - c0, f)
+        ab[0, 1:] = upper[c0:c1].ravel()[:-1]
+        ab[1] = diag[c0:c1].ravel()
+        ab[2, :-1] = lower[c0:c1].ravel()[1:]
+        out[c0:c1] = solve_banded((1, 1), ab, rhs[c0:c1].ravel()).reshape(c1 - c0, f)
     return out.T
 
 

@@ -187,3 +187,19 @@ def test_markers_in_blocks_give_the_same_result(monkeypatch: pytest.MonkeyPatch)
     blocks = resample(t, y, u, offsets=off)
     assert_array_equal(blocks.flags, whole.flags)
     assert_array_equal(blocks.values, whole.values)
+
+
+def test_every_run_is_its_own_not_a_knot_spline() -> None:
+    t = irregular_times(40, seed=6)
+    rng = np.random.default_rng(6)
+    y = rng.normal(size=(40, 2))
+    y[[9, 10, 25], 0] = np.nan  # channel 0: runs 0-8, 11-24, 26-39
+    y[[4, 20], 1] = np.nan  # channel 1: runs 0-3 (4 samples), 5-19, 21-39
+    u = np.sort(rng.uniform(t[0], t[-1], 500))
+    r = resample(t, y, u)
+    for ch, runs in ((0, [(0, 9), (11, 25), (26, 40)]), (1, [(0, 4), (5, 20), (21, 40)])):
+        for a, b in runs:
+            inside = (u >= t[a]) & (u <= t[b - 1])
+            want = CubicSpline(t[a:b], y[a:b, ch])(u[inside])
+            assert_allclose(r.values[inside, ch], want, atol=1e-10)
+            assert np.all(r.valid[inside, ch])
