@@ -10,7 +10,9 @@ maximum-likelihood point (Gauss-Newton on the pixel error until it stops moving,
 Peers, on the same observations: aniposelib ``CameraGroup.triangulate`` (all views,
 undistorted by OpenCV inside), and OpenCV ``cv2.triangulatePoints`` on the first two
 views of each point after ``cv2.undistortPoints`` (it takes exactly two cameras). A
-missing peer is reported as skipped. Times are the best of ``--repeats`` runs.
+missing peer is reported as skipped. Times are the best of ``--repeats`` runs. The default
+estimator (ODLE with depth weights) is timed on one thread (``workers=1``) and on two
+(``workers=2``); the other spotlab rows use the default (the CPUs available).
 
 Usage: ``python benchmarks/triangulation.py [--points 100000] [--repeats 5] [--seed 0]``
 """
@@ -135,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
                       "views_mean": round(float(views.mean()), 3), "floor_rms_mm": floor}),
           flush=True)  # fmt: skip
     runs: list[tuple[str, str, Callable[[np.ndarray], np.ndarray] | str]] = [
-        ("spotlab", "odle", lambda a: triangulate(rig, a)),
+        ("spotlab", "odle_1_worker", lambda a: triangulate(rig, a, workers=1)),
+        ("spotlab", "odle_2_workers", lambda a: triangulate(rig, a, workers=2)),
         ("spotlab", "odle_unweighted", lambda a: triangulate(rig, a, iterations=0)),
         ("spotlab", "dlt", lambda a: triangulate(rig, a, "dlt")),
         ("spotlab", "dlt_plain", lambda a: triangulate(rig, a, "dlt", iterations=0)),

@@ -162,7 +162,7 @@ def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArra
     Q[:, 6] = w
     frame = views.frame
     M = frame.odle_matrix
-    X, conditioning = _solve(M @ Q.reshape(7 * C, N))
+    X, conditioning = _solve(_product(M, Q.reshape(7 * C, N)))
     if depth_weighted:
         for k in range(iterations):
             z = frame.r3 @ X.T
@@ -171,8 +171,23 @@ def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArra
             np.divide(frame.f2, z, out=z)
             scaled = Q if k == iterations - 1 else np.empty_like(Q)
             np.multiply(Q, z[:, None, :], out=scaled)
-            X, conditioning = _solve(M @ scaled.reshape(7 * C, N))
+            X, conditioning = _solve(_product(M, scaled.reshape(7 * C, N)))
     return X, conditioning
+
+
+#: Columns per matrix product: OpenBLAS runs products of fewer than 2^18 multiply-adds on
+#: the calling thread; larger ones start its threads, which on a busy machine (or beside
+#: the caller's own workers) made the product up to 10 times slower.
+_PRODUCT_FLOPS = 1 << 18
+
+
+def _product(M: FloatArray, Q: FloatArray) -> FloatArray:
+    """``M @ Q`` in column slices small enough to run on the calling thread."""
+    out = np.empty((M.shape[0], Q.shape[1]))
+    width = max(1, _PRODUCT_FLOPS // (M.shape[0] * M.shape[1]))
+    for j in range(0, Q.shape[1], width):
+        np.matmul(M, Q[:, j : j + width], out=out[:, j : j + width])
+    return out
 
 
 def _solve(entries: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -29,7 +29,7 @@ Method = Literal["odle", "dlt", "midpoint"]
 METHODS: tuple[str, ...] = ("odle", "dlt", "midpoint")
 
 #: Points per chunk undistorted together (per camera, only the seen observations).
-_CHUNK = 1 << 14
+_CHUNK = 1 << 15
 #: Rays (cameras x points) per block of the solvers.
 _BLOCK_RAYS = 1 << 15
 _MIN_BLOCK = 256
@@ -38,7 +38,7 @@ _MAX_WORKERS = 8
 
 
 def _workers(workers: int | None, n_blocks: int) -> int:
-    """Threads to use for ``n_blocks`` blocks: ``workers`` or the CPUs this process may use."""
+    """Threads for ``n_blocks`` blocks of work: ``workers`` or the CPUs this process may use."""
     if workers is None:
         workers = min(len(os.sched_getaffinity(0)), _MAX_WORKERS)
     return max(1, min(workers, n_blocks))
@@ -129,7 +129,7 @@ def triangulate_points(
     strict: bool = False,
     min_conditioning: float = 1e-8,
     outlier_px: float = 3.0,
-    workers: int | None = None,
+    workers: int | None = 1,
 ) -> TriangulationResult:
     """Triangulate points and report residuals, views, conditioning and outliers.
 
@@ -169,10 +169,11 @@ def triangulate_points(
     outlier_px : float
         A point is flagged as an outlier when one of its rays misses it by more than
         this (px).
-    workers : int, optional
-        Threads that share the points (blocks of about ``16384 / C`` points each).
-        Default: as many as the CPUs this process may use (at most 8). The threads end
-        before the function returns; the result does not depend on their number.
+    workers : int or None
+        Threads that share the points, in chunks of up to 32768 points (fewer points:
+        one thread); None: as many as the CPUs this process may use (at most 8). The
+        threads end before the function returns. Default 1: on a 2-core machine shared
+        with other work a second thread was measured slower (``docs/benchmarks.md``).
 
     Returns
     -------
@@ -220,7 +221,7 @@ def triangulate(
     refine: int = 0,
     strict: bool = False,
     min_conditioning: float = 1e-8,
-    workers: int | None = None,
+    workers: int | None = 1,
 ) -> FloatArray:
     """World points from their images in several calibrated cameras.
 
@@ -306,7 +307,11 @@ def _triangulate(
     frame = _solvers.Frame(rig.cameras, origin)
     # Chunks of points whose undistorted coordinates stay in the CPU cache, solved in
     # blocks whose temporaries do too.
-    chunks = [slice(start, start + _CHUNK) for start in range(0, N, _CHUNK)]
+    n_workers = _workers(workers, -(-N // _CHUNK))
+    n_chunks = max(1, -(-N // _CHUNK))
+    n_chunks = -(-n_chunks // n_workers) * n_workers  # the same work for every thread
+    step = max(1, -(-N // n_chunks))
+    chunks = [slice(start, start + step) for start in range(0, N, step)]
     size = max(_MIN_BLOCK, _BLOCK_RAYS // C)
 
     def run(chunk: slice) -> None:
@@ -320,7 +325,6 @@ def _triangulate(
                 )
                 X[g], conditioning[g] = _estimate(views, flat[:, g], method, iterations, refine)
 
-    n_workers = _workers(workers, len(chunks))
     if n_workers == 1:
         for chunk in chunks:
             run(chunk)

@@ -32,6 +32,8 @@ UV = RIG.project(np.array([[0.0, 0.0, 900.0], [100.0, 200.0, 1200.0]]))
         (RIG, UV, {"weights": -np.ones((4, 1))}, "finite and >= 0"),
         (RIG, UV, {"weights": [[1.0], [np.nan], [1.0], [1.0]]}, "finite and >= 0"),
         (RIG, UV, {"method": "midpoint"}, "exactly two views"),
+        (RIG, UV, {"workers": 0}, "workers must be an integer >= 1"),
+        (RIG, UV, {"workers": 1.5}, "workers must be an integer >= 1"),
     ],
 )
 def test_bad_input(rig: Any, uv: Any, kwargs: dict[str, Any], match: str) -> None:
