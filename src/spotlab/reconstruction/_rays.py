@@ -86,21 +86,64 @@ def _newton_step(
     x: FloatArray, y: FloatArray, x_d: FloatArray, y_d: FloatArray, k: Coefficients
 ) -> FloatArray:
     """One Newton step towards ``brown(x, y) = (x_d, y_d)`` in place; returns its size
-    (inf where the Jacobian is not positive definite)."""
-    xd, yd, j00, j01, j11 = _brown(x, y, k)
-    xd -= x_d
-    yd -= y_d
-    det = j00 * j11 - j01 * j01
+    (inf where the Jacobian is not positive definite). The terms of :func:`_brown`,
+    written with in-place operations."""
+    k1, k2, p1, p2, k3 = k
+    xx = x * x
+    yy = y * y
+    xy = x * y
+    r2 = xx + yy
+    radial = r2 * k3
+    radial += k2
+    radial *= r2
+    radial += k1
+    radial *= r2
+    radial += 1.0
+    slope = r2 * (6.0 * k3)  # 2 d radial / d r^2
+    slope += 4.0 * k2
+    slope *= r2
+    slope += 2.0 * k1
+    # Residuals: x radial + 2 p1 xy + p2 (3 xx + yy) - x_d, and the same for y.
+    ex = x * radial
+    ex -= x_d
+    ex += (2.0 * p1) * xy
+    ex += (3.0 * p2) * xx
+    ex += p2 * yy
+    ey = y * radial
+    ey -= y_d
+    ey += (2.0 * p2) * xy
+    ey += (3.0 * p1) * yy
+    ey += p1 * xx
+    j00 = xx * slope
+    j00 += radial
+    j00 += (2.0 * p1) * y
+    j00 += (6.0 * p2) * x
+    j11 = yy * slope
+    j11 += radial
+    j11 += (6.0 * p1) * y
+    j11 += (2.0 * p2) * x
+    j01 = xy * slope
+    j01 += (2.0 * p1) * x
+    j01 += (2.0 * p2) * y
+    det = j00 * j11
+    det -= j01 * j01
+    ok = det > 0.0
     inv_det = 1.0 / det
-    dx = (j11 * xd - j01 * yd) * inv_det
-    dy = (j00 * yd - j01 * xd) * inv_det
+    dx = j11 * ex
+    dx -= j01 * ey
+    dx *= inv_det
+    dy = j00 * ey
+    dy -= j01 * ex
+    dy *= inv_det
     x -= dx
     y -= dy
     np.abs(dx, out=dx)
     np.abs(dy, out=dy)
     np.maximum(dx, dy, out=dx)
     # A Jacobian that is not positive definite: the folded branch (no unique inverse).
-    dx[~((det > 0.0) & (j00 + j11 > 0.0))] = np.inf
+    j00 += j11
+    ok &= j00 > 0.0
+    dx[~ok] = np.inf
     return dx
 
 
