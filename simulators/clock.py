@@ -70,8 +70,11 @@ class DeviceClock:
         self.drift_ppm = float(drift_ppm)
         self.jitter_s = float(jitter_s)
         self.epoch_ns = time.monotonic_ns() if epoch_ns is None else int(epoch_ns)
+        self.seed = int(seed)
         self._rate = 1.0 + self.drift_ppm * 1e-6
         ordered = sorted((float(at), float(delta)) for at, delta in steps)
+        #: The steps as given, ``(at_s, delta_s)`` in time order.
+        self.steps = tuple(ordered)
         # Steps in oscillator seconds, with the running sum of all steps up to each one.
         self._step_osc = np.array([at * self._rate for at, _ in ordered], dtype=np.float64)
         self._step_sum = np.cumsum([delta for _, delta in ordered], dtype=np.float64)
@@ -134,3 +137,15 @@ class DeviceClock:
         if self.jitter_s == 0.0:
             return 0.0
         return float(self._rng.normal(0.0, self.jitter_s))
+
+    def jitter_for(self, *key: int) -> float:
+        """The trigger-jitter sample of the event named by ``key`` (e.g. stream, frame), s.
+
+        A pure function of the seed and the key, so that another simulator given
+        this clock's parameters (the lab wiring, :mod:`spotlab.simulators.lab`)
+        reproduces the same instants.
+        """
+        if self.jitter_s == 0.0:
+            return 0.0
+        rng = np.random.default_rng([self.seed, 0xC10C, *(k & 0xFFFFFFFF for k in key)])
+        return float(rng.normal(0.0, self.jitter_s))

@@ -32,6 +32,7 @@ from spotlab.simulators.faults import (
     flip_bit,
     truncate,
 )
+from spotlab.simulators.lab import LabPublisher
 from spotlab.simulators.line import BIT_NS, Chunk, Outcome, Segment, TxLine
 from spotlab.simulators.psd import PsdModel
 from spotlab.simulators.scene import Scene
@@ -72,6 +73,9 @@ class SelspotDevice(SpxCommands):
         Set header flag bit 2 ("simulated device") in every frame.
     now_ns : int, optional
         World time of power-up (default: ``time.monotonic_ns()``).
+    lab : LabPublisher, optional
+        Where to publish the frame-pulse schedule of every stream (see
+        :mod:`spotlab.simulators.lab`); None: the device is in no lab.
     """
 
     def __init__(
@@ -89,8 +93,11 @@ class SelspotDevice(SpxCommands):
         fifo_bytes: int = FIFO_BYTES,
         mark_simulated: bool = True,
         now_ns: int | None = None,
+        lab: LabPublisher | None = None,
     ) -> None:
         now = time.monotonic_ns() if now_ns is None else int(now_ns)
+        self.lab = lab
+        self._running: SpxStream | None = None
         rate_mhz = round(default_rate_hz * 1000)
         if not 1_000 <= rate_mhz <= 10_000_000:
             raise ValueError(f"default frame rate must be 1 Hz to 10 kHz, got {default_rate_hz}")
@@ -128,6 +135,20 @@ class SelspotDevice(SpxCommands):
         self._power_on(now, None)
 
     # ------------------------------------------------------------------ public
+    @property
+    def _stream(self) -> SpxStream | None:
+        """The running stream; setting it tells the lab (at the device's current time)."""
+        return self._running
+
+    @_stream.setter
+    def _stream(self, stream: SpxStream | None) -> None:
+        if self.lab is not None and stream is not self._running:
+            if self._running is not None:
+                self.lab.stopped(self._now)
+            if stream is not None:
+                self.lab.started(stream.index, self._now, stream.start_osc, stream.period_s)
+        self._running = stream
+
     @property
     def baud(self) -> int:
         """The device's line rate now."""
@@ -234,6 +255,8 @@ class SelspotDevice(SpxCommands):
                 now = self._advance(now_ns)
                 self.line.release(now)
             self._closed = True
+            if self.lab is not None and self._running is not None:
+                self.lab.stopped(now)
             if self._truth is not None:
                 self._truth.close()
             self._write_log(now)
@@ -335,7 +358,7 @@ class SelspotDevice(SpxCommands):
         if self._truth is not None:
             self._truth.add(taken.truth)
         self._resync_latch |= taken.resynced
-        size = wire.spx_frame_length(stream.n, stream.cams)
+        size = stream.frame_bytes
         got = None
         drop: FaultEntry | None = None
         if self._overflow_left > 0:

@@ -11,19 +11,25 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 from urllib.parse import parse_qsl, quote, urlsplit
 
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import FaultInjector
+from spotlab.simulators.lab import LabPublisher, PulseSource, lab_dir
 from spotlab.simulators.motions import MOTIONS, make_motion
 from spotlab.simulators.scene import Ambient, Mirror, Scene, ring_rig
 from spotlab.simulators.selspot import SelspotDevice
+from spotlab.simulators.timer import TimerDevice
+
+_O = TypeVar("_O")
 
 # Served devices are switched on this long before their port exists: their
 # power-up banner is over by then, as with a device that was already running
 # when the host opened its port (a host resets it to see the banner).
 POWER_UP_LEAD_NS = 100_000_000
+#: Width of the frame pulse a simulated SPX system publishes to the lab.
+FRAME_PULSE_WIDTH_S = 10e-6
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -63,6 +69,11 @@ class SelspotSimOptions:
     rig_out : Path, optional
         Where to write the simulated cameras as a spotlab rig (TOML, detector counts;
         see :meth:`PsdModel.rig`): the truth a calibration should find.
+    lab_name : str
+        Name under which the frame pulses are published to the lab folder (a
+        timer's ``--input N=NAME``); empty: not published.
+    lab : Path, optional
+        The lab folder (default: :func:`~spotlab.simulators.lab.lab_dir`).
 
     Notes
     -----
@@ -86,6 +97,8 @@ class SelspotSimOptions:
     ambient: float = 0.0
     floor_reflectance: float = 0.05
     rig_out: Path | None = None
+    lab_name: str = ""
+    lab: Path | None = None
 
     def validate(self) -> None:
         """Raise ValueError naming the first bad option."""
@@ -149,6 +162,11 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         fault_log=options.fault_log,
         default_rate_hz=options.rate_hz,
         now_ns=clock.epoch_ns,
+        lab=(
+            LabPublisher(lab_dir(options.lab), options.lab_name, clock, FRAME_PULSE_WIDTH_S)
+            if options.lab_name
+            else None
+        ),
     )
     if options.rig_out is not None:
         device.psd.rig(scene.cameras).save(options.rig_out)
@@ -175,10 +193,17 @@ def options_from_url(url: str) -> SelspotSimOptions:
     ValueError
         For another family, an unknown option or a value of the wrong type.
     """
+    options = _options_from_url(url, "selspot", SelspotSimOptions)
+    options.validate()
+    return options
+
+
+def _options_from_url(url: str, family: str, cls: type[_O]) -> _O:
+    """Options of class ``cls`` from the query of ``sim://FAMILY?...`` (not validated)."""
     split = urlsplit(url)
-    if split.scheme != "sim" or split.netloc != "selspot":
-        raise ValueError(f"not a simulated selspot URL: {url!r} (expected sim://selspot?...)")
-    kinds = {f.name: f.type for f in fields(SelspotSimOptions)}
+    if split.scheme != "sim" or split.netloc != family:
+        raise ValueError(f"not a simulated {family} URL: {url!r} (expected sim://{family}?...)")
+    kinds = {f.name: f.type for f in fields(cls)}  # type: ignore[arg-type]
     values: dict[str, Any] = {}
     for key, text in parse_qsl(split.query, keep_blank_values=True):
         name = _URL_NAMES.get(key, key)
@@ -198,9 +223,7 @@ def options_from_url(url: str) -> SelspotSimOptions:
                 values[name] = text
         except ValueError:
             raise ValueError(f"option {key}={text!r} in {url!r} is not a valid {kind}") from None
-    options = SelspotSimOptions(**values)
-    options.validate()
-    return options
+    return cls(**values)
 
 
 def serve_pty(options: SelspotSimOptions) -> PtyServer:
@@ -221,3 +244,116 @@ def serve_tcp(options: SelspotSimOptions, port: int = 0) -> TcpServer:
     )
     server.start()
     return server
+
+
+@dataclass
+class TimerSimOptions:
+    """A simulated TMR timer/sync unit.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Frame rate after reset or ``INIT:``.
+    seed : int
+        Seed of capture jitter, line garbling and random faults.
+    truth : Path, optional
+        Frame truth CSV; the edge truth goes to ``<truth>.edges.csv``.
+    fault_log : Path, optional
+        Fault-log JSON.
+    faults : str
+        Fault schedule.
+    fault_rate : float
+        Random frame faults per data frame.
+    clock_offset_s, clock_drift_ppm, clock_jitter_s : float
+        The unit's clock; the jitter applies to frame instants and edge captures.
+    inputs : str
+        Wiring, ``"0=selspot,1=selspot1"``: input number = lab name of a device.
+    lab : Path, optional
+        The lab folder (default: :func:`~spotlab.simulators.lab.lab_dir`).
+    serial : str
+        Serial number in the ``VER:0`` reply.
+    """
+
+    rate_hz: float = 100.0
+    seed: int = 0
+    truth: Path | None = None
+    fault_log: Path | None = None
+    faults: str = ""
+    fault_rate: float = 0.0
+    clock_offset_s: float = 0.0
+    clock_drift_ppm: float = 0.0
+    clock_jitter_s: float = 0.0
+    inputs: str = ""
+    lab: Path | None = None
+    serial: str = "SIM00077"
+
+    def wiring(self) -> dict[int, str]:
+        """``inputs`` as input number -> lab name; ValueError if malformed."""
+        out: dict[int, str] = {}
+        for item in filter(None, self.inputs.split(",")):
+            number, sep, name = item.partition("=")
+            if not sep or not number.strip().isdigit() or not name.strip():
+                raise ValueError(f"an input is wired as N=SOURCE, got {item!r}")
+            if not 0 <= int(number) <= 7:
+                raise ValueError(f"timer inputs are 0-7, got {number}")
+            out[int(number)] = name.strip()
+        return out
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad option."""
+        if not 1.0 <= self.rate_hz <= 10_000.0:
+            raise ValueError(f"rate must be 1 Hz to 10 kHz, got {self.rate_hz}")
+        self.wiring()
+
+
+def build_timer_device(options: TimerSimOptions, now_ns: int | None = None) -> TimerDevice:
+    """A powered-up simulated TMR unit, its inputs wired through the lab folder."""
+    options.validate()
+    clock = DeviceClock(
+        offset_s=options.clock_offset_s,
+        drift_ppm=options.clock_drift_ppm,
+        jitter_s=options.clock_jitter_s,
+        seed=options.seed,
+        epoch_ns=now_ns,
+    )
+    folder = lab_dir(options.lab)
+    return TimerDevice(
+        clock,
+        FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed),
+        inputs={i: PulseSource(folder, name) for i, name in options.wiring().items()},
+        serial=options.serial,
+        seed=options.seed,
+        truth=options.truth,
+        fault_log=options.fault_log,
+        default_rate_hz=options.rate_hz,
+        now_ns=clock.epoch_ns,
+    )
+
+
+def serve_timer_pty(options: TimerSimOptions) -> PtyServer:
+    """Serve a simulated TMR unit on a pseudo-terminal; ``.path`` is the stable link."""
+    from spotlab.simulators.transports.pty import PtyServer
+
+    device = build_timer_device(options, now_ns=time.monotonic_ns() - POWER_UP_LEAD_NS)
+    server = PtyServer(device, name="timer")
+    server.start()
+    return server
+
+
+def timer_url_for(options: TimerSimOptions) -> str:
+    """The ``sim://timer?...`` URL of these options (defaults left out)."""
+    default = TimerSimOptions()
+    parts = []
+    for f in fields(options):
+        value = getattr(options, f.name)
+        if value == getattr(default, f.name) or value is None:
+            continue
+        parts.append(f"{_URL_SHORT.get(f.name, f.name)}={quote(str(value), safe='/@:,.-=')}")
+    return "sim://timer" + ("?" + "&".join(parts) if parts else "")
+
+
+def device_from_url(url: str, now_ns: int | None = None) -> SelspotDevice:
+    """The simulated device a ``sim://selspot?...`` or ``sim://timer?...`` URL describes."""
+    if urlsplit(url).netloc == "timer":
+        return build_timer_device(_options_from_url(url, "timer", TimerSimOptions), now_ns=now_ns)
+    return build_device(options_from_url(url), now_ns=now_ns)

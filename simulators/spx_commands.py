@@ -182,12 +182,7 @@ class SpxCommands:
             raise CommandError(0x23)
         if not cfg.bandwidth_ok(self._baud):
             raise CommandError(0x80)
-        if self.faults.anchor(t):
-            for spec in self.faults.timed_specs:
-                if spec.kind == "disconnect" and spec.arg is not None:
-                    t0 = self.faults.at_ns(spec)
-                    entry = self.fault_log.new("disconnect", spec.at_s, t0, "schedule", spec.arg)
-                    self.line.add_down(t0, t0 + round(spec.arg * 1e9), entry.id)
+        self._anchor_faults(t)
         self._reply("OKAY", t)
         stream_cfg = SpxConfig(**{**cfg.__dict__, "table": list(cfg.table)})
         self._stream = SpxStream(
@@ -195,6 +190,15 @@ class SpxCommands:
         )
         self._streams += 1
         self._overflow_left = 0
+
+    def _anchor_faults(self, t: int) -> None:
+        """At the first ``START:``: fix the fault schedule's zero and plan the disconnects."""
+        if self.faults.anchor(t):
+            for spec in self.faults.timed_specs:
+                if spec.kind == "disconnect" and spec.arg is not None:
+                    t0 = self.faults.at_ns(spec)
+                    entry = self.fault_log.new("disconnect", spec.at_s, t0, "schedule", spec.arg)
+                    self.line.add_down(t0, t0 + round(spec.arg * 1e9), entry.id)
 
     def _cmd_stop(self, cmd: Command, t: int) -> str | None:
         self._no_params(cmd)

@@ -19,6 +19,7 @@ import numpy.typing as npt
 
 from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
+from spotlab.simulators.lab import frame_start
 from spotlab.simulators.psd import PsdModel, PsdReading
 from spotlab.simulators.scene import Scene
 from spotlab.simulators.truth import TruthRow
@@ -113,17 +114,19 @@ class SpxStream:
 
     def _timing(self, k: int) -> tuple[int, int, float]:
         """(ready world ns, tick in µs unwrapped, true oscillator start) of frame ``k``."""
-        nominal = self.start_osc + k * self.period_s
-        dev_us = self.clock.device_us_at_osc(nominal)
-        tick = round(dev_us)
-        osc0 = nominal + (tick - dev_us) * 1e-6
+        tick, osc0 = frame_start(self.clock, self.start_osc, self.period_s, k)
         done = osc0 + (self.n + 1 + self.config.dark_slots()) * self.slot_s
         return self.clock.world_ns_at(done), tick, osc0
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes of one whole data frame of this stream."""
+        return wire.spx_frame_length(self.n, self.cams)
 
     def take(self) -> TakenFrame:
         """Sample the scene for the frame that is ready now, run AGC, schedule the next one."""
         cfg, n = self.config, self.n
-        jitter_ns = self.clock.jitter() * 1e9
+        jitter_ns = self.clock.jitter_for(self.index, self.frame_no) * 1e9
         k = np.arange(n, dtype=np.float64)
         slot_osc = self._osc0 + (k + 0.5) * self.slot_s
         epoch = self.clock.epoch_ns

@@ -6,7 +6,8 @@ returns a port wired to a :class:`SelspotDevice`, e.g.::
 
     sim://selspot?cameras=4&leds=32&rate=200&seed=1&faults=bitflip@1.5&truth=/tmp/t.csv
 
-Options: see :func:`spotlab.simulators.service.options_from_url`.
+Options: see :func:`spotlab.simulators.service.options_from_url`; ``sim://timer?...``
+takes the fields of :class:`~spotlab.simulators.service.TimerSimOptions`.
 
 The port behaves like a real one: the device is driven by the world clock
 (reads sleep until the device's next byte or frame, never spin), bytes arrive
@@ -30,7 +31,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from spotlab.simulators.line import garble
 from spotlab.simulators.selspot import SelspotDevice
-from spotlab.simulators.service import POWER_UP_LEAD_NS, build_device, options_from_url
+from spotlab.simulators.service import POWER_UP_LEAD_NS, device_from_url
 
 MIN_WAIT_NS = 1_000_000
 MAX_WAIT_NS = 50_000_000
@@ -64,8 +65,7 @@ class Serial(SerialBase):
         now = time.monotonic_ns()
         if self.device is None:
             try:
-                options = options_from_url(self.portstr)
-                self.device = build_device(options, now_ns=now - POWER_UP_LEAD_NS)
+                self.device = device_from_url(self.portstr, now_ns=now - POWER_UP_LEAD_NS)
             except ValueError as exc:
                 raise SerialException(f"could not open port {self.portstr!r}: {exc}") from exc
         if self.device.link_down(now):
