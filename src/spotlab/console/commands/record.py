@@ -66,7 +66,11 @@ def _device_list(args: argparse.Namespace) -> list[tuple[str, str]]:
     return pairs
 
 
-def _driver_options(args: argparse.Namespace, cls: type[Driver]) -> dict[str, Any]:
+def _driver_options(
+    args: argparse.Namespace, cls: type[Driver], mixed: bool = False
+) -> dict[str, Any]:
+    """Keyword arguments of ``cls`` from the flags; with ``mixed`` families, flags that do
+    not apply to this one (``--cameras`` for a timer) are left to the others."""
     accepted = inspect.signature(cls.__init__).parameters
     options: dict[str, Any] = {}
     for flag, keyword in DEVICE_OPTIONS.items():
@@ -74,6 +78,8 @@ def _driver_options(args: argparse.Namespace, cls: type[Driver]) -> dict[str, An
         if value is None:
             continue
         if keyword not in accepted:
+            if mixed:
+                continue
             raise CommandError(f"--{flag} does not apply to {cls.family} devices")
         if keyword == "baud" and value != "auto":
             try:
@@ -89,12 +95,13 @@ def build_drivers(args: argparse.Namespace) -> list[Driver]:
     pairs = _device_list(args)
     drivers: list[Driver] = []
     counts: dict[str, int] = {}
+    mixed = len({family for family, _ in pairs}) > 1
     for family, port in pairs:
         cls = load_driver(family)
         n = counts.get(family, 0)
         counts[family] = n + 1
         name = family if n == 0 else f"{family}{n}"
-        drivers.append(cls(port, name=name, **_driver_options(args, cls)))
+        drivers.append(cls(port, name=name, **_driver_options(args, cls, mixed)))
     if len(pairs) > 1:
         # Name every stream by family and index when a family appears more than once.
         for d in drivers:

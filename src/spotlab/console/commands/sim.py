@@ -7,11 +7,15 @@ import signal
 import sys
 import threading
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
 from spotlab.simulators import service
 from spotlab.simulators.motions import MOTIONS
+
+if TYPE_CHECKING:
+    from spotlab.simulators.transports.pty import PtyServer
+    from spotlab.simulators.transports.tcp import TcpServer
 
 
 def add_parser(sub: Any) -> None:
@@ -22,7 +26,7 @@ def add_parser(sub: Any) -> None:
         "the device path to open; with --tcp it is a socket:// URL. It serves until stopped "
         "(Ctrl-C, SIGTERM) or until --seconds have passed.",
     )
-    p.add_argument("family", choices=["selspot"], help="device family")
+    p.add_argument("family", choices=["selspot", "timer"], help="device family")
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--pty", action="store_true", help="serve on a real pseudo-terminal (default)"
@@ -65,6 +69,26 @@ def add_parser(sub: Any) -> None:
         metavar="RIG.toml",
         help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
     )
+    p.add_argument(
+        "--lab",
+        type=Path,
+        metavar="DIR",
+        help="lab folder where simulators publish their frame pulses (default: $SPOTLAB_LAB, "
+        "else spotlab-lab-<uid> in the temp folder)",
+    )
+    p.add_argument(
+        "--lab-name",
+        default=None,
+        help="selspot: name under which its frame pulses are published (default 'selspot'; "
+        "give each system its own)",
+    )
+    p.add_argument(
+        "--input",
+        action="append",
+        default=[],
+        metavar="N=SOURCE",
+        help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
+    )
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     p.set_defaults(run=run)
 
@@ -96,11 +120,51 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         motion=motion,
         floor_reflectance=args.reflectance,
         rig_out=args.rig_out,
+        lab_name=args.lab_name if args.lab_name is not None else "selspot",
+        lab=args.lab,
     )
 
 
+def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions:
+    """Timer simulator options from parsed command-line arguments."""
+    if not 1.0 <= args.rate <= 10_000.0:
+        raise CommandError(f"--rate must be 1 to 10000 Hz, got {args.rate}")
+    options = service.TimerSimOptions(
+        rate_hz=args.rate,
+        seed=args.seed,
+        truth=args.truth,
+        fault_log=args.fault_log,
+        faults=args.faults,
+        clock_offset_s=args.clock_offset,
+        clock_drift_ppm=args.clock_drift_ppm,
+        clock_jitter_s=args.clock_jitter,
+        inputs=",".join(args.input),
+        lab=args.lab,
+    )
+    try:
+        options.validate()
+    except ValueError as exc:
+        raise CommandError(f"--input: {exc}") from None
+    return options
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.family == "timer":
+        if args.tcp is not None:
+            raise CommandError("the timer simulator serves on a pseudo-terminal only (--pty)")
+        return _serve(args, service.serve_timer_pty(timer_options_from_args(args)))
+    if args.input:
+        raise CommandError("--input wires timer inputs; selspot systems have none")
     options = options_from_args(args)
+    server = (
+        service.serve_tcp(options, port=args.tcp)
+        if args.tcp is not None
+        else service.serve_pty(options)
+    )
+    return _serve(args, server)
+
+
+def _serve(args: argparse.Namespace, server: PtyServer | TcpServer) -> int:
     stop = threading.Event()
 
     def _stop(signum: int, frame: object) -> None:
@@ -108,11 +172,6 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
-    server = (
-        service.serve_tcp(options, port=args.tcp)
-        if args.tcp is not None
-        else service.serve_pty(options)
-    )
     try:
         print(server.url if args.tcp is not None else server.path, flush=True)
         stop.wait(args.seconds)
