@@ -164,6 +164,15 @@ def load_xdf_clocks(path: str | Path, *, k: float = 8.0) -> list[XdfStreamClock]
         import pyxdf
     except ImportError as exc:
         raise RecordingError("reading XDF needs pyxdf: pip install 'spotlab[lsl]'") from exc
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise RecordingError(f"cannot read XDF file {path}: {exc}") from exc
+    if magic != b"XDF:":
+        # checked here: pyxdf leaves the file open when it refuses one
+        raise RecordingError(f"cannot read XDF file {path}: it does not start with 'XDF:'")
     try:
         streams, _ = pyxdf.load_xdf(str(path), synchronize_clocks=False, dejitter_timestamps=False)
     except (OSError, ValueError, KeyError) as exc:
