@@ -15,6 +15,7 @@ import pytest
 import serial
 
 from spotlab.core.errors import DeviceError
+from spotlab.core.frames import FrameBlock
 from spotlab.drivers.timer import TimerDriver, extract_edges
 from spotlab.testing.wire import ask, reset
 from spotlab.testing.wire import command as wire_command
@@ -70,7 +71,7 @@ class TimerConformance:
         driver = TimerDriver(timer_port, rate_hz=100.0, slots=4, timecode=(25, False))
         with driver:
             driver.command("POUT:2,5000")  # a pulse every 5 ms on output 2
-            blocks = []
+            blocks: list[FrameBlock] = []
             while sum(len(b) for b in blocks) < 60:
                 block = driver.recv(timeout=2.0)
                 assert block is not None, "no timer frames within 2 s"
