@@ -120,8 +120,8 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         motion=motion,
         floor_reflectance=args.reflectance,
         rig_out=args.rig_out,
-        lab_name=args.lab_name if args.lab_name is not None else "selspot",
-        lab=args.lab,
+        lab_name=getattr(args, "lab_name", None) or "selspot",
+        lab=getattr(args, "lab", None),
     )
 
 
