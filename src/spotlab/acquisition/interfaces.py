@@ -76,6 +76,19 @@ class Sink(Protocol):
         """The session ended: every block has been delivered. Release resources."""
 
 
+@runtime_checkable
+class InlineSink(Sink, Protocol):
+    """A sink the session calls from the device's reader thread, with no hand-off.
+
+    ``inline`` must be ``True``. ``on_block`` and ``on_error`` then run in every
+    reader thread right after ``recv`` returned: they must be quick (they delay the
+    next read) and thread-safe (several devices' readers may call them at once).
+    Their exceptions are counted as sink errors and never end the reader.
+    """
+
+    inline: bool
+
+
 class SinkBase(ABC):
     """Convenience base for sinks: override :meth:`on_block`, the rest are no-ops.
 

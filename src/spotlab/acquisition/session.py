@@ -8,6 +8,13 @@ sinks: when its queue is full the block is dropped *for that sink only* and
 counted (:meth:`Session.sink_stats`). Raw bytes are recorded by taps on the
 devices (see :class:`~spotlab.acquisition.recorder.Recorder`), never through
 these queues, so a recording loses nothing to back-pressure.
+
+A sink with a true ``inline`` attribute (:class:`InlineSink`) is called instead
+directly by each reader thread, right after ``recv`` returned: no queue and no
+thread hand-off, for latency-critical consumers such as the live pipeline. It
+must be quick and thread-safe (several readers may call it at once); its
+exceptions are caught, counted in :meth:`Session.sink_stats` and never end the
+reader.
 """
 
 from __future__ import annotations
@@ -22,7 +29,7 @@ from types import TracebackType
 from typing import Any
 
 from spotlab.acquisition._channel import SinkChannel, SinkStats
-from spotlab.acquisition.interfaces import Device, Sink, SinkBase
+from spotlab.acquisition.interfaces import Device, InlineSink, Sink, SinkBase
 from spotlab.core.errors import (
     ConfigurationError,
     DeviceDisconnected,
@@ -35,6 +42,7 @@ from spotlab.core.wire import WireTap
 __all__ = [
     "Device",
     "DeviceErrorRecord",
+    "InlineSink",
     "Session",
     "SessionStatus",
     "Sink",
@@ -185,6 +193,14 @@ class Session:
         self._is_fatal = is_fatal
         self._close_devices = close_devices
         self._channels = [SinkChannel(n, queue_size) for n in _sink_names(self.sinks)]
+        # Inline sinks: called by the readers, one lock each for their counters.
+        self._inline = [
+            (sink, channel, threading.Lock())
+            for sink, channel in zip(self.sinks, self._channels, strict=True)
+            if getattr(sink, "inline", False) is True
+        ]
+        inline_ids = {id(channel) for _, channel, _ in self._inline}
+        self._queued = [c for c in self._channels if id(c) not in inline_ids]
         self._frames = dict.fromkeys(names, 0)
         self._errors: deque[DeviceErrorRecord] = deque(maxlen=1000)
         self._n_errors = 0
@@ -228,6 +244,8 @@ class Session:
                 if callable(hook):
                     hook(list(self.devices))
             for sink, channel in zip(self.sinks, self._channels, strict=True):
+                if channel not in self._queued:
+                    continue
                 self._spawn(
                     self._dispatchers, self._dispatch, (sink, channel), channel.name, "sink"
                 )
@@ -364,13 +382,16 @@ class Session:
     def _read(self, device: Device) -> None:
         name = device.name
         stop = self._stop_event
-        channels = self._channels
+        channels = self._queued
+        inline = self._inline
         while not stop.is_set():
             try:
                 block = device.recv(timeout=self._recv_timeout)
             except Exception as exc:
                 fatal = bool(self._is_fatal(exc))
                 self._note_error(name, exc, fatal)
+                for sink, channel, lock in inline:
+                    self._call_inline(sink.on_error, name, exc, channel, lock, error=True)
                 for channel in channels:
                     channel.put_error(name, exc)
                 if fatal:
@@ -381,8 +402,35 @@ class Session:
             if block is None or not len(block):
                 continue
             self._frames[name] += len(block)
+            for sink, channel, lock in inline:
+                self._call_inline(sink.on_block, name, block, channel, lock, error=False)
             for channel in channels:
                 channel.put_block(name, block)
+
+    @staticmethod
+    def _call_inline(
+        call: Callable[[str, Any], None],
+        stream: str,
+        payload: Any,
+        channel: SinkChannel,
+        lock: threading.Lock,
+        *,
+        error: bool,
+    ) -> None:
+        """Deliver to an inline sink in the reader's thread; its exceptions are counted."""
+        try:
+            call(stream, payload)
+        except Exception:
+            with lock:
+                channel.sink_errors += 1
+                n = channel.sink_errors
+            if n <= 3:
+                log.exception("inline sink %s failed on a %s item", channel.name, stream)
+        with lock:
+            if error:
+                channel.errors_delivered += 1
+            else:
+                channel.delivered += 1
 
     def _note_error(self, stream: str, exc: BaseException, fatal: bool) -> None:
         with self._lock:
