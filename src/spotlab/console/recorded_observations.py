@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.acquisition.live.readings import FLAG_SATURATED, PSD_MAX_COUNT, usable_counts
 from spotlab.acquisition.replay import replay
 from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
@@ -45,10 +46,6 @@ FloatArray = NDArray[np.float64]
 #: Image size of a lateral-photodiode camera in detector counts (12-bit coordinates):
 #: its centre (2048, 2048) is the detector's.
 PSD_IMAGE_SIZE = (4096, 4096)
-#: Largest detector count a reading can take; a reading there (or at 0) was clipped.
-PSD_MAX_COUNT = 4094.0
-#: SPX record flag: the ADC saturated (``docs/protocols/selspot.md``).
-FLAG_SATURATED = 0x02
 
 
 @dataclass
@@ -116,19 +113,6 @@ def read_selspot(path: Path) -> SelspotRecording:
         float(spec.get("rate_hz", np.nan)),
         float(spec.get("tick_hz", np.nan)),
     )
-
-
-def usable_counts(data: FloatArray, flags: NDArray[np.uint8]) -> FloatArray:
-    """Detector counts (F, M, C, 2) of ``data`` (F, M, C, >=2), NaN where unusable.
-
-    Not valid (NaN already), saturated, and clipped (0 or 4094 counts) readings are
-    dropped (see the module docstring).
-    """
-    uv = data[..., :2].copy()
-    unusable = (flags & FLAG_SATURATED) != 0
-    unusable |= ((uv == 0) | (uv == PSD_MAX_COUNT)).any(axis=-1)
-    uv[unusable] = np.nan
-    return uv
 
 
 def frame_numbers(recording: SelspotRecording, path: Path) -> NDArray[np.intp]:
