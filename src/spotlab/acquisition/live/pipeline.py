@@ -146,6 +146,9 @@ class LivePipeline(SinkBase):
         and three times the frame period.
     name : str
         Sink name in the session's reports.
+    inline : bool
+        Run in the readers' threads (default); False: in a dispatcher thread of its
+        own behind a bounded queue, like other sinks (for comparison).
 
     Raises
     ------
@@ -154,7 +157,7 @@ class LivePipeline(SinkBase):
 
     Notes
     -----
-    ``inline = True``: the session calls :meth:`on_block` in each device's reader
+    With ``inline`` the session calls :meth:`on_block` in each device's reader
     thread, with no queue or hand-off (see ``Session``). Several readers share the
     pipeline through one lock. Frames are triangulated one at a time, so a frame's
     result does not depend on how the bytes were chunked: replaying the recording
@@ -173,11 +176,13 @@ class LivePipeline(SinkBase):
         tolerance_s: float | None = None,
         max_wait_s: float | None = None,
         name: str = "live",
+        inline: bool = True,
     ) -> None:
         if not isinstance(rig, Rig):
             raise ConfigurationError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
         self.rig = rig
         self.name = name
+        self.inline = inline
         self.consumers = list(consumers)
         self._wanted = None if streams is None else list(streams)
         self._clocks = dict(clocks or {})
@@ -332,6 +337,13 @@ class LivePipeline(SinkBase):
                     log.exception("live pipeline: consumer %r failed", consumer)
 
     # -- figures ------------------------------------------------------------------
+    def reset_latency(self) -> None:
+        """Forget the latencies so far (for example those of a warm-up)."""
+        with self._lock:
+            self.latency = LatencyStats()
+            for st in self._streams.values():
+                st.latency = LatencyStats()
+
     def stats(self) -> LiveStats:
         """Counters and latency figures so far."""
         matcher = self._matcher
