@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test lint typecheck layers unit bench fuzz clean
+.PHONY: demo test lint typecheck layers unit bench bench-gcvspline fuzz clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "spotlab needs Python 3.11 or newer"'
@@ -35,6 +35,14 @@ test: lint typecheck layers unit
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
 	$(BIN)/python benchmarks/run_all.py
+
+# The gcvspline peer of benchmarks/spline_gcv.py: an sdist built with numpy.distutils,
+# which needs gfortran and setuptools < 70 in its build environment.
+bench-gcvspline: $(STAMP)
+	command -v gfortran >/dev/null || apt-get install -y gfortran
+	printf 'setuptools<70\n' > $(VENV)/gcvspline-build-constraint.txt
+	$(BIN)/python -m pip install --quiet gcvspline==0.5 \
+		--build-constraint $(VENV)/gcvspline-build-constraint.txt
 
 # One million mutated inputs through every SPX decoder path (about 20 minutes on 2 cores).
 fuzz: $(STAMP)

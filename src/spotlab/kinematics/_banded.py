@@ -7,9 +7,10 @@ per-row arrays of the few non-zero entries; nothing is N x N.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import BSpline
 
 FloatArray = NDArray[np.float64]
 
@@ -62,6 +63,35 @@ def qwq_band(q: FloatArray, winv: FloatArray) -> FloatArray:
     return ab
 
 
+def _bspline_values(knots: FloatArray, t: FloatArray, degree: int) -> list[FloatArray]:
+    """Values of the B-splines of a degree that are non-zero on each knot interval.
+
+    Row i of ``t`` (shape (I, P)) holds points of knot interval ``degree + i``,
+    ``knots[degree + i] <= t < knots[degree + i + 1]``. Returns ``degree + 1``
+    arrays shaped like ``t``: entry a is the B-spline of index ``i + a``
+    (Cox-de Boor recursion, vectorised over intervals and points).
+    """
+    rows = t.shape[0]
+
+    def knot(shift: int) -> FloatArray:
+        # knots[degree + i + shift] for every interval i, as a column
+        return knots[degree + shift : degree + shift + rows, None]
+
+    values = [np.ones_like(t)]
+    for r in range(1, degree + 1):
+        saved = np.zeros_like(t)
+        nxt = []
+        for s in range(r):
+            right = knot(s + 1) - t
+            left = t - knot(s + 1 - r)
+            term = values[s] / (right + left)
+            nxt.append(saved + right * term)
+            saved = left * term
+        nxt.append(saved)
+        values = nxt
+    return values
+
+
 def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     """Gram matrix ``R_jk = integral N_j N_k`` of the order-m B-splines on knots x.
 
@@ -70,40 +100,98 @@ def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     have degree 2m - 2; an m-point Gauss-Legendre rule per interval is exact.
     Returned in upper band storage of half-bandwidth m (its own is m - 1),
     shape (m + 1, N - m).
+
+    Notes
+    -----
+    The m B-splines alive on sample interval i are ``N_{i-m+1} .. N_i``; each
+    pair's integral over the interval is a Gauss sum, and entry (j, j + d) adds
+    the pairs (a, a + d) of intervals ``i = j + m - 1 - a``: shifted slices, no
+    scatter.
     """
     n = x.size
     rows = n - m
+    degree = m - 1
     nodes, weights = np.polynomial.legendre.leggauss(m)
     h = np.diff(x)
-    mid = 0.5 * (x[1:] + x[:-1])
-    points = (mid[:, None] + 0.5 * h[:, None] * nodes[None, :]).ravel()
-    qw = (0.5 * h[:, None] * weights[None, :]).ravel()
+    # points of interval i, shape (N - 1, m)
+    points = 0.5 * (x[1:] + x[:-1])[:, None] + 0.5 * h[:, None] * nodes[None, :]
+    qw = 0.5 * h[:, None] * weights[None, :]
     # m - 1 extra knots each side put every sample interval inside the base interval
     pad = np.arange(1, m)
     knots = np.concatenate([x[0] - pad[::-1] * h[0], x, x[-1] + pad * h[-1]])
-    dm = BSpline.design_matrix(points, knots, m - 1).tocsr()
-    if dm.nnz != m * points.size:  # pragma: no cover - scipy stores m entries per row
-        raise AssertionError("unexpected design-matrix structure")
-    vals = dm.data.reshape(-1, m)
-    first = dm.indices.reshape(-1, m)[:, 0] - (m - 1)
-    scale = np.zeros(rows + m + 1)
-    scale[:rows] = m / (x[m:] - x[:rows])
+    values = _bspline_values(knots, points, degree)
+    # unit-integral scaling: N_j = m / (x_{j+m} - x_j) B_j
+    scale = m / (x[m:] - x[:rows])
     ab = np.zeros((m + 1, rows))
     for a in range(m):
-        ca = first + a
         for b in range(a, m):
-            cb = first + b
-            ok = (ca >= 0) & (cb < rows)
-            contrib = qw[ok] * vals[ok, a] * vals[ok, b] * scale[ca[ok]] * scale[cb[ok]]
-            ab[m - (b - a)] += np.bincount(cb[ok], weights=contrib, minlength=rows)
+            per_interval = (qw * values[a] * values[b]).sum(axis=1)  # (N - 1,)
+            d = b - a
+            # interval i couples N_{i-m+1+a} and N_{i-m+1+b}: row j = i - m + 1 + a
+            lo = m - 1 - a  # interval of row 0
+            count = rows - d
+            ab[m - d, d:] += per_interval[lo : lo + count]
+    for d in range(m + 1):
+        ab[m - d, d:] *= scale[: rows - d] * scale[d:]
     return ab
 
 
-def inverse_band(chol: FloatArray) -> FloatArray:
-    """Band of the inverse of a matrix from its upper banded Cholesky factor.
+def _companion_step(
+    window: list[list[FloatArray]], c: list[FloatArray], source: FloatArray
+) -> tuple[list[list[FloatArray]], FloatArray, list[FloatArray]]:
+    """``T X T^T + source e1 e1^T`` for symmetric windows held as nested lists.
 
-    Returns ``s`` with ``s[i, d] = inv(A)[i, i + d]`` for ``d = 0 .. bw``
-    (zero past the end).
+    ``T = [[-c^T], [I, 0]]`` is the companion matrix of one row of the Cholesky
+    factor. Returns the new window, its corner (a diagonal entry of the inverse)
+    and ``y = X c`` (minus the rest of that row of the inverse).
+    """
+    bw = len(c)
+    y = []
+    for a in range(bw):
+        acc = window[a][0] * c[0]
+        for col in range(1, bw):
+            acc = acc + window[a][col] * c[col]
+        y.append(acc)
+    corner = source + c[0] * y[0]
+    for a in range(1, bw):
+        corner = corner + c[a] * y[a]
+    new: list[list[FloatArray]] = [[corner] * bw for _ in range(bw)]
+    for k in range(1, bw):
+        new[0][k] = new[k][0] = -y[k - 1]
+        for col in range(1, bw):
+            new[k][col] = window[k - 1][col - 1]
+    return new, corner, y
+
+
+class _BlockLayout:
+    """Samples ``i = b * length + j`` laid out as (length, blocks) arrays, blocks contiguous."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.length = min(max(int(np.ceil(np.sqrt(n))), 1), n)
+        self.blocks = -(-n // self.length)
+        self.total = self.blocks * self.length
+
+    def arrange(self, values: FloatArray, out: FloatArray) -> FloatArray:
+        """``values`` (n,) into ``out`` (length, blocks), zero past the end."""
+        by_block = out.T  # (blocks, length), a view
+        full, rest = divmod(values.size, self.length)
+        by_block[:full] = values[: full * self.length].reshape(full, self.length)
+        if full < self.blocks:
+            by_block[full, :rest] = values[full * self.length :]
+            by_block[full, rest:] = 0.0
+            by_block[full + 1 :] = 0.0
+        return out
+
+
+def _takahashi(
+    chol: FloatArray, layout: _BlockLayout, coupling: FloatArray, source: FloatArray
+) -> Iterator[tuple[int, FloatArray, list[FloatArray]]]:
+    """Steps of Takahashi's recursion for all blocks at once, last sample first.
+
+    Yields ``(j, corner, y)`` per step j of every block: ``corner`` (blocks,) is
+    ``inv(A)[i, i]`` and ``-y[k - 1]`` is ``inv(A)[i, i + k]`` for ``i = b * length + j``.
+    ``coupling`` (bw, length, blocks) and ``source`` (length, blocks) are work arrays.
 
     Notes
     -----
@@ -111,58 +199,86 @@ def inverse_band(chol: FloatArray) -> FloatArray:
     ``U Sigma = U^-T``, the window ``X_i = Sigma[i:i+bw, i:i+bw]`` follows
     ``X_i = T_i X_{i+1} T_i^T + e_1 e_1^T / U_ii^2`` with ``T_i`` the
     companion matrix of row i of U, O(n bw^2) in all. The maps compose, so
-    the n steps run as ~sqrt(n) blocks side by side: compose each block's
-    map, chain the block maps, then run all blocks from their known ends
-    together. About 3 sqrt(n) vectorised steps instead of n scalar ones.
+    the n steps run as blocks side by side: compose each block's map, chain
+    the block maps, then run all blocks from their known ends together. The
+    windows are held entry by entry (arrays over blocks), so each step is a
+    few dozen vector operations.
     """
     bw = chol.shape[0] - 1
     n = chol.shape[1]
-    length = max(int(np.ceil(np.sqrt(n))), 1)
-    blocks = -(-n // length)
-    total = blocks * length
-    # past the end: no coupling and no source, so the window stays zero
-    coupling = np.zeros((total, bw))
-    source = np.zeros(total)
+    blocks, length = layout.blocks, layout.length
     diag = chol[bw]
+    # past the end: no coupling and no source, so the window stays zero
     for d in range(1, bw + 1):
-        coupling[: n - d, d - 1] = chol[bw - d, d:] / diag[: n - d]
-    source[:n] = 1.0 / diag**2
-    # block b, step j is sample b * length + j: views, no gathers, in the loops
-    coupling_bj = coupling.reshape(blocks, length, bw)
-    source_bj = source.reshape(blocks, length)
-
-    def apply_t(c: FloatArray, x: FloatArray) -> FloatArray:
-        # T x for a batch, T = [[-c], [I, 0]] (the companion matrix of row i of U)
-        tx = np.empty_like(x)
-        tx[:, 0, :] = -np.einsum("bk,bkl->bl", c, x)
-        tx[:, 1:, :] = x[:, :-1, :]
-        return tx
-
-    def step(x: FloatArray, j: int) -> FloatArray:
-        # T x T^T + source e1 e1^T
-        c = coupling_bj[:, j]
-        out = apply_t(c, apply_t(c, x).transpose(0, 2, 1))
-        out[:, 0, 0] += source_bj[:, j]
-        return out
-
+        row = np.zeros(n)
+        np.divide(chol[bw - d, d:], diag[: n - d], out=row[: n - d])
+        layout.arrange(row, coupling[d - 1])
+    layout.arrange(1.0 / diag**2, source)
+    zero = np.zeros(blocks)
     # 1. each block's map X -> phi X phi^T + psi
-    phi = np.broadcast_to(np.eye(bw), (blocks, bw, bw)).copy()
-    psi = np.zeros((blocks, bw, bw))
+    phi = [[np.full(blocks, float(a == b)) for b in range(bw)] for a in range(bw)]
+    psi = [[zero] * bw for _ in range(bw)]
     for j in range(length - 1, -1, -1):
-        phi = apply_t(coupling_bj[:, j], phi)
-        psi = step(psi, j)
+        c = [coupling[k, j] for k in range(bw)]
+        top = []
+        for col in range(bw):
+            acc = phi[0][col] * c[0]
+            for k in range(1, bw):
+                acc = acc + phi[k][col] * c[k]
+            top.append(-acc)
+        phi = [top, *phi[:-1]]
+        psi, _, _ = _companion_step(psi, c, source[j])
+    phi_b: FloatArray = np.moveaxis(np.array(phi), 2, 0)
+    psi_b: FloatArray = np.moveaxis(np.array(psi), 2, 0)
     # 2. the window at the end of each block
     ends = np.zeros((blocks, bw, bw))
     x = np.zeros((bw, bw))
     for b in range(blocks - 1, -1, -1):
         ends[b] = x
-        x = phi[b] @ x @ phi[b].T + psi[b]
+        x = phi_b[b] @ x @ phi_b[b].T + psi_b[b]
     # 3. all blocks from their ends at once
-    s = np.zeros((blocks, length, bw + 1))
-    x_batch = ends
+    window = [[np.ascontiguousarray(ends[:, a, b]) for b in range(bw)] for a in range(bw)]
     for j in range(length - 1, -1, -1):
-        s[:, j, bw] = -np.einsum("bk,bk->b", coupling_bj[:, j], x_batch[:, :, bw - 1])
-        x_batch = step(x_batch, j)
-        s[:, j, :bw] = x_batch[:, 0, :]
-    s = s.reshape(total, bw + 1)
-    return s[:n]
+        window, corner, y = _companion_step(window, [coupling[k, j] for k in range(bw)], source[j])
+        yield j, corner, y
+
+
+class InverseTrace:
+    """``tr(inv(A) R)`` for banded A (from its Cholesky factor) and a fixed banded R.
+
+    Parameters
+    ----------
+    r : ndarray, shape (bw + 1, n)
+        R in upper band storage (the band of A may be as wide, not wider).
+
+    Notes
+    -----
+    Only the band of ``inv(A)`` enters the trace, and its entries are summed as
+    Takahashi's recursion (:func:`_takahashi`) produces them, block-major, so no
+    band of the inverse is ever stored. The work arrays are kept between calls:
+    a smoothing-parameter search evaluates the trace many times at one size.
+    """
+
+    def __init__(self, r: FloatArray) -> None:
+        bw = r.shape[0] - 1
+        n = r.shape[1]
+        self.layout = _BlockLayout(n)
+        shape = (self.layout.length, self.layout.blocks)
+        # entry (i, i + d) counts twice for d > 0 (both triangles)
+        self.r = np.empty((bw + 1, *shape))
+        for d in range(bw + 1):
+            row = np.zeros(n)
+            row[: n - d] = r[bw - d, d:] * (1.0 if d == 0 else 2.0)
+            self.layout.arrange(row, self.r[d])
+        self.coupling = np.empty((bw, *shape))
+        self.source = np.empty(shape)
+
+    def __call__(self, chol: FloatArray) -> float:
+        """The trace, for the upper banded Cholesky factor ``chol`` (bw + 1, n) of A."""
+        bw = chol.shape[0] - 1
+        acc = np.zeros(self.layout.blocks)
+        for j, corner, y in _takahashi(chol, self.layout, self.coupling, self.source):
+            acc += corner * self.r[0, j]
+            for k in range(1, bw + 1):
+                acc -= y[k - 1] * self.r[k, j]
+        return float(acc.sum())

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, optimize
+from scipy.linalg import lapack
 
 from spotlab.kinematics import _banded
 
@@ -76,8 +77,11 @@ class PenalisedSpline:
         self.winv = 1.0 / w
         self.n_eff = x.size
         self.q = _banded.divided_differences(x, m)
-        self.r = _banded.bspline_gram_band(x, m)
-        self.qwq = _banded.qwq_band(self.q, self.winv)
+        # LAPACK's band layout is column-major: keep the bands so, to factor in place
+        self.r = np.asfortranarray(_banded.bspline_gram_band(x, m))
+        self.qwq = np.asfortranarray(_banded.qwq_band(self.q, self.winv))
+        self._work = np.empty_like(self.r, order="F")
+        self._trace = _banded.InverseTrace(self.r)
         self.factorial2 = float(math.factorial(m) ** 2)
         # p where the fit goes from near-interpolation (spline wavelength ~ the median
         # sample spacing) to the polynomial (wavelength ~ the record): the search range
@@ -88,64 +92,188 @@ class PenalisedSpline:
             order * np.log10(x[-1] - x[0]) - np.log10(w_mean) + 3.0,
         )
 
-    def solve(self, p: float, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Fitted values (N, K) and the Cholesky factor of ``R + p (m!)^2 Q^T W^-1 Q``."""
-        pp = p * self.factorial2
-        chol = np.asarray(
-            linalg.cholesky_banded(self.r + pp * self.qwq, lower=False, check_finite=False)
-        )
-        rhs = _banded.qt_times(self.q, y)
-        delta = linalg.cho_solve_banded((chol, False), rhs, check_finite=False)
-        fitted = y - pp * self.winv[:, None] * _banded.q_times(self.q, delta)
+    def factor(self, p: float) -> FloatArray:
+        """Upper banded Cholesky factor of ``R + p (m!)^2 Q^T W^-1 Q``, shape (m + 1, N - m).
+
+        The factor lives in a work array that the next call overwrites.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            When the matrix is not positive definite to working precision.
+        """
+        np.multiply(self.qwq, p * self.factorial2, out=self._work)
+        self._work += self.r
+        chol, info = lapack.dpbtrf(self._work, lower=0, overwrite_ab=1)
+        if info != 0:
+            raise linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+        return np.asarray(chol)
+
+    def solve(
+        self, p: float, y: FloatArray, rhs: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Fitted values (N, K) and the Cholesky factor of ``R + p (m!)^2 Q^T W^-1 Q``.
+
+        ``rhs`` is ``Q^T y`` when the caller has it (it does not depend on p).
+        """
+        chol = self.factor(p)
+        if rhs is None:
+            rhs = _banded.qt_times(self.q, y)
+        delta, info = lapack.dpbtrs(chol, rhs, lower=0)
+        if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
+            raise linalg.LinAlgError(f"banded solve failed (info {info})")
+        fitted = y - (p * self.factorial2) * self.winv[:, None] * _banded.q_times(self.q, delta)
         return fitted, chol
 
-    def statistics(self, p: float, y: FloatArray) -> tuple[FloatArray, FitStatistics]:
+    def statistics(
+        self, p: float, y: FloatArray, rhs: FloatArray | None = None
+    ) -> tuple[FloatArray, FitStatistics]:
         """Fitted values and fit figures at smoothing parameter p."""
-        fitted, chol = self.solve(p, y)
+        fitted, chol = self.solve(p, y, rhs)
         n = self.n_eff
         msr = (self.w[:, None] * (y - fitted) ** 2).sum(axis=0) / n
         # tr(I - A) = p (m!)^2 tr(Sigma Q^T W^-1 Q) = tr(Sigma (M - R)) = (N - m) - tr(Sigma R):
         # only Sigma's band is needed, and no large divided differences enter
-        band = _banded.inverse_band(chol)
-        rows = self.r.shape[1]
-        trace_sr = float(np.dot(band[:, 0], self.r[self.m]))
-        for d in range(1, self.m + 1):
-            trace_sr += 2.0 * float(np.dot(band[: rows - d, d], self.r[self.m - d, d:]))
-        rdof = rows - trace_sr
+        rdof = self.r.shape[1] - self._trace(chol)
         rdof = max(rdof, np.finfo(float).tiny)
         gcv = msr / (rdof / n) ** 2
         return fitted, FitStatistics(msr=msr, dof=n - rdof, gcv=gcv, variance=msr * n / rdof)
 
 
-def _gcv_at(problem: PenalisedSpline, y: FloatArray, log_p: float) -> float:
-    try:
-        _, stats = problem.statistics(10.0**log_p, y)
-    except linalg.LinAlgError:
-        return np.inf
-    if stats.dof > problem.n_eff * (1.0 - 1e-9):
-        return np.inf  # interpolation: the criterion is 0/0 there
-    return float(stats.gcv[0])
+class _Criterion:
+    """GCV of one channel as a function of ``log10 p``, remembering every value."""
+
+    def __init__(self, parts: list[tuple[PenalisedSpline, FloatArray]]) -> None:
+        # several parts make one criterion: residuals and degrees of freedom add up
+        self.parts = [(problem, y, _banded.qt_times(problem.q, y)) for problem, y in parts]
+        self.n = sum(problem.n_eff for problem, _ in parts)
+        self.seen: dict[float, float] = {}
+        # the fit at the smallest value so far (one part only): the caller needs it last
+        self.best: tuple[float, float, FloatArray, FitStatistics] | None = None
+
+    def __call__(self, log_p: float) -> float:
+        key = float(log_p)
+        if key not in self.seen:
+            self.seen[key] = self._evaluate(key)
+        return self.seen[key]
+
+    def _evaluate(self, log_p: float) -> float:
+        rss = rdof = 0.0
+        for problem, y, rhs in self.parts:
+            try:
+                fitted, stats = problem.statistics(10.0**log_p, y, rhs)
+            except linalg.LinAlgError:
+                return np.inf
+            rss += float(stats.msr[0]) * problem.n_eff
+            rdof += problem.n_eff - stats.dof
+        if rdof < self.n * 1e-9:
+            return np.inf  # interpolation: the criterion is 0/0 there
+        value = (rss / self.n) / (rdof / self.n) ** 2
+        if len(self.parts) == 1 and (self.best is None or value < self.best[0]):
+            self.best = (value, log_p, fitted, stats)
+        return value
+
+    def fit_at(self, log_p: float) -> tuple[FloatArray, FitStatistics] | None:
+        """The fit already computed at ``log_p`` if it was the best one, else None."""
+        if self.best is not None and self.best[1] == float(log_p):
+            return self.best[2], self.best[3]
+        return None
 
 
-def minimise_gcv(problem: PenalisedSpline, y: FloatArray, step: float = 2.0) -> float:
-    """Smoothing parameter minimising GCV for one channel y (N, 1).
-
-    A scan over ``log10 p`` with one point per ``step`` decades across the
-    whole range from near-interpolation to the polynomial brackets the global
-    minimum; bounded Brent refinement then locates it to 1e-6 in log10 p
-    (GCVSPL searches log p by golden section and parabolic steps as well).
-    """
-    lo, hi = problem.log_p_range
+def _scan_and_refine(
+    criterion: _Criterion, lo: float, hi: float, step: float, xatol: float
+) -> float:
+    """log10 p of the smallest criterion on a grid over [lo, hi], refined by Brent."""
     grid = np.arange(lo, hi + step, step)
-    values = np.array([_gcv_at(problem, y, g) for g in grid])
+    values = np.array([criterion(g) for g in grid])
     if not np.any(np.isfinite(values)):
-        return float(10.0 ** grid[-1])
+        return float(grid[-1])
     best = int(np.argmin(values))
     a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
     res = optimize.minimize_scalar(
-        lambda g: _gcv_at(problem, y, g), bounds=(a, b), method="bounded", options={"xatol": 1e-6}
+        criterion, bounds=(a, b), method="bounded", options={"xatol": xatol}
     )
-    return float(10.0**res.x) if res.fun <= values[best] else float(10.0 ** grid[best])
+    return float(res.x) if res.fun <= values[best] else float(grid[best])
+
+
+#: Records longer than this are searched from a start value (see :func:`minimise_gcv`).
+LONG_RECORD = 50_000
+#: Segments, and samples per segment, that give a long record's start value.
+START_SEGMENTS = 4
+START_SEGMENT_LENGTH = 4_000
+
+
+def _start_value(problem: PenalisedSpline, x: FloatArray, y: FloatArray) -> float:
+    """log10 p minimising the joint GCV of a few segments spread over the record."""
+    n = x.size
+    starts = np.linspace(0, n - START_SEGMENT_LENGTH, START_SEGMENTS).astype(int)
+    parts = [
+        (
+            PenalisedSpline(
+                x[s : s + START_SEGMENT_LENGTH], problem.w[s : s + START_SEGMENT_LENGTH], problem.m
+            ),
+            y[s : s + START_SEGMENT_LENGTH],
+        )
+        for s in starts
+    ]
+    lo, hi = problem.log_p_range
+    return _scan_and_refine(_Criterion(parts), lo, hi, step=2.0, xatol=1e-2)
+
+
+def _bracket(criterion: _Criterion, start: float, lo: float, hi: float) -> tuple[float, ...]:
+    """Three values of log10 p around a local minimum of the criterion, walking from start."""
+    step = 0.25
+    a, b = start, start + step
+    if criterion(b) > criterion(a):
+        a, b, step = b, a, -step  # walk downhill: towards smaller p
+    c = b + step
+    while criterion(c) < criterion(b):
+        if not lo - 10.0 < c < hi + 10.0:
+            break  # no interior minimum: the criterion keeps falling to an end
+        step *= 2.0
+        a, b, c = b, c, c + step
+    return (a, b, c) if a < c else (c, b, a)
+
+
+def gcv_fit(
+    problem: PenalisedSpline, y: FloatArray, step: float = 2.0, x: FloatArray | None = None
+) -> tuple[float, FloatArray, FitStatistics]:
+    """Smoothing parameter minimising GCV for one channel y (N, 1), with its fit.
+
+    Returns p, the fitted values (N, 1) and the figures of the fit at p.
+
+    Up to :data:`LONG_RECORD` samples, a scan over ``log10 p`` with one point per
+    ``step`` decades across the whole range from near-interpolation to the
+    polynomial brackets the global minimum; bounded Brent refinement then
+    locates it to 1e-6 in log10 p (GCVSPL searches log p by golden section and
+    parabolic steps as well).
+
+    Longer records (``x``, the sample times, given) are searched like GCVSPL
+    searches every record: from a start value, walking until GCV rises, then
+    Brent to a relative 1e-5 in log10 p (p to about 1e-4). GCVSPL starts where the fit has N/2
+    degrees of freedom; here the start is the joint GCV minimum of
+    :data:`START_SEGMENTS` segments of :data:`START_SEGMENT_LENGTH` samples spread
+    over the record (a stationary signal has the same p on a segment as on the
+    whole), so a few full-size evaluations suffice. The walk finds the local
+    minimum nearest to that start.
+    """
+    criterion = _Criterion([(problem, y)])
+    lo, hi = problem.log_p_range
+    if x is None or problem.n_eff <= LONG_RECORD:
+        log_p = _scan_and_refine(criterion, lo, hi, step, xatol=1e-6)
+    else:
+        a, b, c = _bracket(criterion, _start_value(problem, x, y), lo, hi)
+        if criterion(b) < min(criterion(a), criterion(c)):
+            res = optimize.minimize_scalar(criterion, bracket=(a, b, c), method="brent", tol=1e-5)
+            log_p = float(res.x)
+        else:
+            log_p = min((a, b, c), key=criterion)
+    p = float(10.0**log_p)
+    known = criterion.fit_at(log_p)
+    if known is not None:
+        return p, known[0], known[1]
+    fitted, stats = problem.statistics(p, y)
+    return p, fitted, stats
 
 
 def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:

@@ -9,7 +9,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline, make_interp_spline
 
 from spotlab.kinematics.errors import KinematicsError
-from spotlab.kinematics.gcv import PenalisedSpline, minimise_gcv, solve_wood_jennings
+from spotlab.kinematics.gcv import PenalisedSpline, gcv_fit, solve_wood_jennings
 
 FloatArray = NDArray[np.float64]
 
@@ -157,19 +157,17 @@ class SmoothingSpline:
             # a missing sample has zero weight, and a zero-weight knot does not change the
             # minimiser: fit the samples present, interpolate the gaps with the same spline
             problem = shared if shared is not None else PenalisedSpline(tt[keep], w[keep], m)
-            if p is not None:
-                pj = float(p)
-            elif sigma is None:
-                pj = minimise_gcv(problem, col)
+            if p is None and sigma is None:
+                pj, fitted, st = gcv_fit(problem, col, x=tt[keep])
             else:
-                pj = solve_wood_jennings(problem, col)
-            try:
-                fitted, st = problem.statistics(pj, col)
-            except np.linalg.LinAlgError as exc:
-                raise KinematicsError(
-                    f"p = {pj:g} is too large for these {col.shape[0]} samples: the banded "
-                    "system is singular to working precision; use a smaller p"
-                ) from exc
+                pj = float(p) if p is not None else solve_wood_jennings(problem, col)
+                try:
+                    fitted, st = problem.statistics(pj, col)
+                except np.linalg.LinAlgError as exc:
+                    raise KinematicsError(
+                        f"p = {pj:g} is too large for these {col.shape[0]} samples: the "
+                        "banded system is singular to working precision; use a smaller p"
+                    ) from exc
             fits.append(BSpline.construct_fast(*self._natural(tt[keep], fitted[:, 0], degree)))
             stats.append((pj, st))
         self._fits = fits
