@@ -70,6 +70,7 @@ class FrameMatcher(Generic[T]):
         self.max_wait_s = float(max_wait_s)
         self._queues: list[deque[tuple[float, T]]] = [deque() for _ in range(n_streams)]
         self._newest = float("-inf")
+        self._last = [float("-inf")] * n_streams
         self.incomplete = 0
         self.late = 0
 
@@ -87,12 +88,11 @@ class FrameMatcher(Generic[T]):
             The groups now decided, oldest first: the time of the group's first frame
             and one item (or None) per stream.
         """
-        queues = self._queues
-        q = queues[stream]
-        if q and time_s <= q[-1][0]:
+        if time_s <= self._last[stream]:
             self.late += 1  # out of order within its own stream: cannot be matched
             return []
-        q.append((time_s, item))
+        self._last[stream] = time_s
+        self._queues[stream].append((time_s, item))
         self._newest = max(self._newest, time_s)
         return self._drain()
 
