@@ -11,7 +11,8 @@ from scipy import optimize
 
 from spotlab.kinematics import SmoothingSpline
 
-DATA = Path("/work/shared/data")
+# the shared folder beside the project (CI clones it there too)
+DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared reference data not present")
 
 
