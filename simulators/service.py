@@ -58,6 +58,9 @@ class SelspotSimOptions:
         Random frame faults per data frame.
     clock_offset_s, clock_drift_ppm, clock_jitter_s : float
         The device clock (see :class:`DeviceClock`).
+    clock_steps : tuple of (float, float)
+        Counter steps ``(at_s, delta_s)``: ``at_s`` s after power-up the counter jumps by
+        ``delta_s`` s (frame pacing and frame pulses are not affected).
     motion : str
         ``wand``, ``cluster``, ``gait`` or the path of a C3D file.
     serial : str
@@ -92,6 +95,7 @@ class SelspotSimOptions:
     clock_offset_s: float = 0.0
     clock_drift_ppm: float = 0.0
     clock_jitter_s: float = 0.0
+    clock_steps: tuple[tuple[float, float], ...] = ()
     motion: str = "wand"
     serial: str = "SIM00042"
     ambient: float = 0.0
@@ -147,6 +151,7 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         offset_s=options.clock_offset_s,
         drift_ppm=options.clock_drift_ppm,
         jitter_s=options.clock_jitter_s,
+        steps=options.clock_steps,
         seed=options.seed,
         epoch_ns=now_ns,
     )
@@ -266,6 +271,8 @@ class TimerSimOptions:
         Random frame faults per data frame.
     clock_offset_s, clock_drift_ppm, clock_jitter_s : float
         The unit's clock; the jitter applies to frame instants and edge captures.
+    clock_steps : tuple of (float, float)
+        Counter steps ``(at_s, delta_s)`` after power-up, as :class:`DeviceClock` takes them.
     inputs : str
         Wiring, ``"0=selspot,1=selspot1"``: input number = lab name of a device.
     lab : Path, optional
@@ -283,6 +290,7 @@ class TimerSimOptions:
     clock_offset_s: float = 0.0
     clock_drift_ppm: float = 0.0
     clock_jitter_s: float = 0.0
+    clock_steps: tuple[tuple[float, float], ...] = ()
     inputs: str = ""
     lab: Path | None = None
     serial: str = "SIM00077"
@@ -313,6 +321,7 @@ def build_timer_device(options: TimerSimOptions, now_ns: int | None = None) -> T
         offset_s=options.clock_offset_s,
         drift_ppm=options.clock_drift_ppm,
         jitter_s=options.clock_jitter_s,
+        steps=options.clock_steps,
         seed=options.seed,
         epoch_ns=now_ns,
     )

@@ -52,6 +52,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--clock-drift-ppm", type=float, default=0.0, metavar="PPM")
     p.add_argument("--clock-jitter", type=float, default=0.0, metavar="SECONDS")
     p.add_argument(
+        "--clock-step",
+        action="append",
+        default=[],
+        metavar="AT:DELTA",
+        help="the device counter jumps by DELTA s at AT s after power-up (frame pulses do not "
+        "move); repeat for several",
+    )
+    p.add_argument(
         "--motion",
         default="wand",
         help="wand, cluster, gait, lframe (static L-frame), or a C3D file whose markers "
@@ -117,12 +125,30 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm,
         clock_jitter_s=args.clock_jitter,
+        clock_steps=clock_steps_from_args(args),
         motion=motion,
         floor_reflectance=args.reflectance,
         rig_out=args.rig_out,
         lab_name=getattr(args, "lab_name", None) or "selspot",
         lab=getattr(args, "lab", None),
     )
+
+
+def clock_steps_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
+    """``--clock-step AT:DELTA`` options as ``(at_s, delta_s)`` pairs."""
+    steps = []
+    for item in getattr(args, "clock_step", None) or []:
+        at, sep, delta = str(item).partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            at_s, delta_s = float(at), float(delta)
+        except ValueError:
+            raise CommandError(f"--clock-step {item!r}: expected AT:DELTA in seconds") from None
+        if not at_s >= 0:
+            raise CommandError(f"--clock-step {item!r}: AT must be >= 0 s")
+        steps.append((at_s, delta_s))
+    return tuple(steps)
 
 
 def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions:
@@ -138,6 +164,7 @@ def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions
         clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm,
         clock_jitter_s=args.clock_jitter,
+        clock_steps=clock_steps_from_args(args),
         inputs=",".join(args.input),
         lab=args.lab,
     )
