@@ -3,17 +3,24 @@
 ``FILE`` is a C3D or TRC file (converted), or observations that ``spotlab reconstruct``
 reads (a ``.spj`` recording, npz, CSV) with ``--calibration``: they are reconstructed on
 the way (:mod:`spotlab.console.trajectories`).
+
+``--timestamps OUT.csv`` writes the session time of every frame of every stream of a
+recording (``stream, seq, time_s, device_ticks, method``), ``--sync-report OUT.json``
+the clock report (reference, drift, jitter and events per stream); see
+:mod:`spotlab.console.session_times` and docs/synchronisation.md "From a recording".
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
+from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
 from spotlab.console.trajectories import (
     check_outputs,
     print_summary,
@@ -36,19 +43,65 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--c3d", type=Path, metavar="OUT", help="write marker trajectories as C3D")
     p.add_argument("--trc", type=Path, metavar="OUT", help="write marker trajectories as TRC")
     p.add_argument("--calibration", type=Path, help="rig (TOML) to reconstruct a recording")
+    p.add_argument(
+        "--timestamps",
+        type=Path,
+        metavar="OUT.csv",
+        help="write the session time of every frame of every stream (stream, seq, time_s, "
+        "device_ticks, method) of a recording",
+    )
+    p.add_argument(
+        "--sync-report",
+        type=Path,
+        metavar="OUT.json",
+        help="write the clock report (reference, drift, jitter, steps per stream) as JSON",
+    )
+    p.add_argument(
+        "--wiring",
+        action="append",
+        default=[],
+        metavar="STREAM=INPUT",
+        help="timer input that captured STREAM's frame pulses (default: found from the "
+        "recording); repeat",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
 
 
 def _outputs(args: argparse.Namespace) -> list[Path]:
     outputs = [path for path in (args.c3d, args.trc) if path is not None]
-    if not outputs:
-        raise CommandError("nothing to export: give --c3d OUT and/or --trc OUT")
+    if not outputs and args.timestamps is None and args.sync_report is None:
+        raise CommandError(
+            "nothing to export: give --c3d OUT and/or --trc OUT, or --timestamps OUT.csv "
+            "and/or --sync-report OUT.json for a recording"
+        )
     for flag, path in (("--c3d", args.c3d), ("--trc", args.trc)):
         if path is not None and path.suffix.lower() != "." + flag[2:]:
             raise CommandError(f"{flag} {path}: the file name must end in .{flag[2:]}")
     check_outputs(outputs)
     return outputs
+
+
+def _session_times(args: argparse.Namespace) -> dict[str, Any]:
+    """--timestamps / --sync-report: the recording's time base; notes go to stderr."""
+    path: Path = args.file
+    if path.suffix.lower() != ".spj":
+        raise CommandError(f"{path}: --timestamps and --sync-report need a recording (.spj)")
+    timebase = recording_timebase(path, parse_wiring(args.wiring))
+    report = timebase.report()
+    for note in timebase.notes:
+        print(f"spotlab: warning: {note}", file=sys.stderr)
+    for s in report["streams"]:
+        for note in s["notes"]:
+            print(f"spotlab: {s['stream']}: {note}", file=sys.stderr)
+    out: dict[str, Any] = {"sync": report}
+    if args.timestamps is not None:
+        out["timestamps"] = str(args.timestamps)
+        out["timestamp_rows"] = write_timestamps(args.timestamps, timebase)
+    if args.sync_report is not None:
+        args.sync_report.write_text(json.dumps(report, indent=1) + "\n")
+        out["sync_report"] = str(args.sync_report)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -57,6 +110,14 @@ def run(args: argparse.Namespace) -> int:
     suffix = path.suffix.lower()
     if not path.is_file():
         raise CommandError(f"{path}: no such file")
+    if args.timestamps is not None or args.sync_report is not None:
+        sync = _session_times(args)
+        if not outputs:
+            if args.json:
+                print(json.dumps(sync))
+            else:
+                _print_sync(sync)
+            return 0
     summary: dict[str, Any]
     if suffix in TRIAL_READERS:
         trial: Trial = TRIAL_READERS[suffix](path)
@@ -88,3 +149,20 @@ def run(args: argparse.Namespace) -> int:
         for out in outputs:
             print(f"  wrote              {out}")
     return 0
+
+
+def _print_sync(sync: dict[str, Any]) -> None:
+    report = sync["sync"]
+    print(f"session time from {report['reference']}")
+    for s in report["streams"]:
+        line = f"  {s['stream']}: {s['frames']} frames, {s.get('method') or 'none'}"
+        if "drift_ppm" in s:
+            line += (
+                f", drift {s['drift_ppm']:+.2f} ppm, jitter {s['jitter_us']:.2f} us, "
+                f"{len(s['events'])} events"
+            )
+        print(line)
+    if "timestamps" in sync:
+        print(f"  wrote              {sync['timestamps']} ({sync['timestamp_rows']} rows)")
+    if "sync_report" in sync:
+        print(f"  wrote              {sync['sync_report']}")

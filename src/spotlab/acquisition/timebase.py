@@ -1,0 +1,561 @@
+"""Session time of every frame of a recording, from the timer's edges of the frame pulses.
+
+A timer stream (docs/protocols/timer.md) stamps, on its 10 MHz counter, the frame pulse
+of every device wired to one of its inputs. :func:`session_timebase` pairs each device
+frame with the edge of its own pulse, fits the device's :class:`ClockModel` (device
+ticks to timer seconds: steps, resets and wraps as events) and gives every frame its
+session time: ``(timer counter - counter of the timer's first frame) / 1e7`` s, the
+timer being the reference. Devices without a timer input, and recordings without a
+timer, fall back to host arrival stamps (:func:`dejitter_arrivals`), and the report says
+so. See docs/synchronisation.md, section "From a recording".
+
+Pairing a frame with its edge. A device counts frames it takes (``seq``, plus the frame
+periods its ticks skip when it drops frames itself); the timer counts the edges of an
+input (``edge_index``, lost edges included). Both counters advance by one per frame
+pulse, so within a run (device and timer streaming without restart) ``pulse =
+frame_index + k`` for one integer ``k``. The periodic pulses alone do not tell ``k``:
+it comes from the host arrival stamps, as the most common offset between each frame
+and the edge nearest to it in host time (lower envelope of the arrivals, with the
+frame's acquisition span of time-multiplexed slots removed). This needs the two
+streams' fastest deliveries to differ by less than half a frame period (about 1 ms
+here against 5-10 ms periods). A clock step or reset does not move ``k``: the pairs
+carry it to :func:`fit_edges`, which finds it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.ndimage import minimum_filter1d
+from scipy.stats import theilslopes
+
+from spotlab.acquisition.clocks import ClockModel, dejitter_arrivals, fit_edges
+from spotlab.acquisition.synchroniser import sample_times
+from spotlab.core.errors import ClockError, SynchronisationError
+from spotlab.core.streams import StreamSpec
+
+I64 = npt.NDArray[np.int64]
+F64 = npt.NDArray[np.float64]
+B = npt.NDArray[np.bool_]
+
+#: Session seconds per timer tick (the TMR counter runs at 10 MHz).
+TIMER_TICK_HZ = 1e7
+#: Per-frame ``method`` codes of :class:`StreamTiming`.
+METHODS = ("reference", "edge", "model", "extrapolated", "arrivals")
+SEQ_RUN = 1 << 16
+#: Seconds of frames over which the lower envelope of the arrivals is taken.
+ENVELOPE_S = 2.0
+
+
+@dataclass(frozen=True)
+class DeviceFrames:
+    """The frames of one recorded device stream (input of :func:`session_timebase`).
+
+    Attributes
+    ----------
+    name : str
+        Stream name.
+    seq : ndarray of int64, shape (F,)
+        Unwrapped sequence numbers (a new run starts at a new multiple of 65536).
+    ticks : ndarray of int64, shape (F,)
+        Unwrapped device ticks.
+    arrival_ns : ndarray of int64, shape (F,)
+        Host arrival stamps, ns.
+    spec : StreamSpec
+        The stream's spec (tick rate, frame rate, slots).
+    """
+
+    name: str
+    seq: I64
+    ticks: I64
+    arrival_ns: I64
+    spec: StreamSpec
+
+
+@dataclass(frozen=True)
+class TimerFrames:
+    """A recorded timer stream: its frames and the edges they carried.
+
+    Attributes
+    ----------
+    name : str
+        Stream name.
+    seq, ticks, arrival_ns : ndarray of int64, shape (F,)
+        Timer frames: seq, counter at the frame (10 MHz), host arrival (ns).
+    edge_input, edge_index, edge_tick : ndarray of int64, shape (K,)
+        Edges: channel, edge number of the channel, counter at the edge.
+    edge_rising : ndarray of bool, shape (K,)
+        Rising edge.
+    """
+
+    name: str
+    seq: I64
+    ticks: I64
+    arrival_ns: I64
+    edge_input: I64
+    edge_index: I64
+    edge_tick: I64
+    edge_rising: B
+
+
+@dataclass
+class StreamTiming:
+    """Session times of one stream's frames and how they were found.
+
+    Attributes
+    ----------
+    name : str
+        Stream name.
+    seq, ticks : ndarray of int64, shape (F,)
+        As recorded.
+    time_s : ndarray of float64, shape (F,)
+        Session time of each frame's first sample, s.
+    method : ndarray of str, shape (F,)
+        Per frame: ``reference`` (the timer's own frames), ``edge`` (the frame's own
+        edge was fitted), ``model`` (between fitted edges: its edge was lost),
+        ``extrapolated`` (outside the span of its clock segment's edges), ``arrivals``.
+    model : ClockModel or None
+        Device ticks to session seconds (None for the timer).
+    channel : int or None
+        Timer input of the stream's frame pulses.
+    notes : list of str
+        What went wrong or was assumed, one line each.
+    spec : StreamSpec or None
+        The stream's spec (for sample times).
+    """
+
+    name: str
+    seq: I64
+    ticks: I64
+    time_s: F64
+    method: npt.NDArray[np.str_]
+    model: ClockModel | None = None
+    channel: int | None = None
+    notes: list[str] = field(default_factory=list)
+    spec: StreamSpec | None = None
+    pairs: int = 0
+
+    def sample_times(self) -> F64:
+        """Session time of every sample, (F, M) with slot offsets, or (F,) without slots.
+
+        Raises
+        ------
+        SynchronisationError
+            If the stream has no spec.
+        """
+        if self.spec is None:
+            raise SynchronisationError(f"stream {self.name!r}: no spec, no sample offsets")
+        rate = 1.0
+        if self.model is not None:
+            rate = float(np.median([s.rate for s in self.model.segments])) * self.spec.tick_hz
+        return sample_times(self.time_s, self.spec, clock_rate=rate)
+
+    def report(self) -> dict[str, Any]:
+        """JSON-safe summary: method, pairs, drift, jitter, events, notes."""
+        counts = {m: int(np.sum(self.method == m)) for m in METHODS if np.any(self.method == m)}
+        out: dict[str, Any] = {
+            "stream": self.name,
+            "frames": int(self.seq.shape[0]),
+            "methods": counts,
+            "channel": self.channel,
+            "pairs": self.pairs,
+            "notes": list(self.notes),
+        }
+        if self.model is not None:
+            m = self.model
+            out.update(
+                method=m.method,
+                drift_ppm=m.drift_ppm,
+                jitter_us=m.jitter_s * 1e6,
+                residual_max_us=float(np.max(np.abs(m.residuals)) * 1e6)
+                if m.residuals.size
+                else 0.0,
+                segments=len(m.segments),
+                events=[
+                    {"kind": e.kind, "at_tick": e.at_tick, "size_s": e.size_s} for e in m.events
+                ],
+            )
+        else:
+            out.update(method="reference" if self.channel is None else "", events=[])
+        return out
+
+
+@dataclass
+class SessionTimebase:
+    """Session times of every stream of a recording.
+
+    Attributes
+    ----------
+    reference : str
+        Name of the timer stream, or ``"host"`` when times come from arrival stamps.
+    origin_tick : int
+        Timer counter (or host ns) at session time 0.
+    streams : dict of str to StreamTiming
+        Per stream, in recording order.
+    notes : list of str
+        Session-wide warnings (no timer, the timer stopped, a stream not found, ...).
+    """
+
+    reference: str
+    origin_tick: int
+    streams: dict[str, StreamTiming]
+    notes: list[str] = field(default_factory=list)
+
+    def report(self) -> dict[str, Any]:
+        """The clock report: reference, notes, and per stream drift, jitter and events."""
+        return {
+            "reference": self.reference,
+            "origin_tick": self.origin_tick,
+            "notes": list(self.notes),
+            "streams": [s.report() for s in self.streams.values()],
+        }
+
+
+# -- arrival stamps -------------------------------------------------------------------
+
+
+def _host_times(ticks: I64, arrival_ns: I64, tick_hz: float, rate_hz: float) -> F64:
+    """Earliest-delivery host time of each frame, s: a line through the arrivals lowered
+    to their running minimum over :data:`ENVELOPE_S` (robust to steps elsewhere)."""
+    n = ticks.shape[0]
+    arr = (arrival_ns - arrival_ns[0]).astype(np.float64) * 1e-9
+    x = (ticks - ticks[0]).astype(np.float64) / tick_hz
+    resid = arr - x
+    size = int(max(3, min(n, ENVELOPE_S * rate_hz)))
+    # rate of the device clock against the host: robust line through the window minima
+    starts = np.arange(0, n, size)
+    lows = np.array([s + int(np.argmin(resid[s : s + size])) for s in starts])
+    slope = 0.0
+    if lows.shape[0] >= 3:
+        slope = float(theilslopes(resid[lows], x[lows])[0])
+        if not (math.isfinite(slope) and abs(slope) < 0.01):
+            slope = 0.0
+    resid = resid - slope * x
+    envelope = minimum_filter1d(resid, size=size, mode="nearest")
+    return np.asarray((1.0 + slope) * x + envelope + arrival_ns[0] * 1e-9, dtype=np.float64)
+
+
+def _frame_index(seq: I64, ticks: I64, period_ticks: float) -> I64:
+    """Frame periods since the first frame: seq steps, or more where the ticks show frames
+    the device dropped itself (a tick step within 10 % of a whole number of periods)."""
+    if seq.shape[0] == 0:
+        return seq.copy()
+    ds = np.diff(seq)
+    periods = np.diff(ticks) / period_ticks
+    whole = np.round(periods)
+    dropped = (np.abs(periods - whole) < 0.1) & (whole > ds)
+    steps = np.where(dropped, whole.astype(np.int64), ds)
+    return np.concatenate([[0], np.cumsum(steps)]).astype(np.int64)
+
+
+def _pulse_index(edge_index: I64) -> I64:
+    """Pulse number of rising edges in one timer run (edge_index counts both polarities
+    when the input is armed for both: steps of 2)."""
+    if edge_index.shape[0] < 2:
+        return edge_index.copy()
+    d = np.diff(edge_index)
+    step = int(np.min(d[d > 0])) if np.any(d > 0) else 1
+    return (edge_index - edge_index[0]) // max(step, 1)
+
+
+@dataclass(frozen=True)
+class _Edges:
+    pulse: I64  # pulse number, made increasing over timer runs
+    tick: I64
+    host_s: F64
+
+
+def _channel_edges(timer: TimerFrames, channel: int, timer_host: F64) -> _Edges | None:
+    keep = (timer.edge_input == channel) & timer.edge_rising
+    if int(keep.sum()) < 3:
+        return None
+    idx = timer.edge_index[keep]
+    tick = timer.edge_tick[keep]
+    runs = np.concatenate([[0], np.cumsum(np.diff(idx) < 0)])
+    pulse = np.empty_like(idx)
+    for r in np.unique(runs):
+        sel = runs == r
+        pulse[sel] = _pulse_index(idx[sel]) + int(r) * (1 << 40)
+    host = np.interp(tick.astype(np.float64), timer.ticks.astype(np.float64), timer_host)
+    return _Edges(pulse, tick, host)
+
+
+def _nearest(sorted_x: F64, x: F64) -> npt.NDArray[np.intp]:
+    pos = np.clip(np.searchsorted(sorted_x, x), 1, max(sorted_x.shape[0] - 1, 1))
+    lo = pos - 1
+    hi = np.minimum(pos, sorted_x.shape[0] - 1)
+    return np.where(np.abs(sorted_x[hi] - x) < np.abs(sorted_x[lo] - x), hi, lo)
+
+
+@dataclass(frozen=True)
+class _Device:
+    frames: DeviceFrames
+    host: F64  # earliest-delivery host time of the frame's first sample, s
+    index: I64  # frame periods since the run's first frame
+    run: I64
+    period_s: float
+
+
+def _device(frames: DeviceFrames) -> _Device:
+    spec = frames.spec
+    tk = frames.ticks
+    period_ticks = spec.tick_hz / spec.rate_hz
+    if tk.shape[0] > 1:
+        d = np.diff(tk)[np.diff(frames.seq) == 1]
+        d = d[d > 0]
+        if d.size:
+            period_ticks = float(np.median(d))
+    span = (spec.slot_period_s or 0.0) * spec.n_markers
+    host = _host_times(tk, frames.arrival_ns, spec.tick_hz, spec.tick_hz / period_ticks) - span
+    run = frames.seq // SEQ_RUN
+    index = np.empty_like(frames.seq)
+    for r in np.unique(run):
+        sel = run == r
+        index[sel] = _frame_index(frames.seq[sel], tk[sel], period_ticks) + int(r) * (1 << 40)
+    return _Device(frames, host, index, run, period_ticks / spec.tick_hz)
+
+
+def _score(dev: _Device, edges: _Edges) -> float:
+    """How well a channel's edges follow a device's frames in host time, -inf..1."""
+    j = _nearest(edges.host_s, dev.host)
+    d = edges.host_s[j] - dev.host
+    med = float(np.median(d))
+    consistent = float(np.mean(np.abs(d - med) < dev.period_s / 8))
+    return consistent - abs(med) / dev.period_s
+
+
+def _pairs(dev: _Device, edges: _Edges) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Indices (frames, edges) of the frames paired with their own edge."""
+    j = _nearest(edges.host_s, dev.host)
+    d = edges.host_s[j] - dev.host
+    near = np.abs(d) < dev.period_s / 2
+    k_of = dev.index - edges.pulse[j]
+    frames_out: list[npt.NDArray[np.intp]] = []
+    edges_out: list[npt.NDArray[np.intp]] = []
+    order = np.argsort(edges.pulse, kind="stable")
+    sorted_pulse = edges.pulse[order]
+    for r in np.unique(dev.run):
+        sel = (dev.run == r) & near
+        if not np.any(sel):
+            continue
+        values, counts = np.unique(k_of[sel], return_counts=True)
+        k = int(values[np.argmax(counts)])
+        rows = np.flatnonzero(dev.run == r)
+        want = dev.index[rows] - k
+        pos = np.clip(np.searchsorted(sorted_pulse, want), 0, sorted_pulse.shape[0] - 1)
+        hit = sorted_pulse[pos] == want
+        frames_out.append(rows[hit])
+        edges_out.append(order[pos[hit]])
+    if not frames_out:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, empty.copy()
+    return np.concatenate(frames_out), np.concatenate(edges_out)
+
+
+def _assign_channels(
+    devices: Mapping[str, _Device],
+    channels: Mapping[int, _Edges],
+    wiring: Mapping[str, int],
+    notes: list[str],
+) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for name, ch in wiring.items():
+        if name not in devices:
+            notes.append(f"--wiring names stream {name!r}, which the recording does not hold")
+        elif ch not in channels:
+            notes.append(f"stream {name!r}: timer input {ch} captured no edges")
+        else:
+            out[name] = ch
+    scores = [
+        (_score(dev, edges), name, ch)
+        for name, dev in devices.items()
+        if name not in out
+        for ch, edges in channels.items()
+        if ch not in out.values()
+    ]
+    for score, name, ch in sorted(scores, reverse=True):
+        if score > 0.5 and name not in out and ch not in out.values():
+            out[name] = ch
+            rivals = [s for s, n, c in scores if n == name and c != ch and s > score - 0.25]
+            if rivals:
+                notes.append(
+                    f"stream {name!r}: timer input {ch} chosen by its edges' phase in host "
+                    "time, but another input follows it nearly as well (systems started "
+                    f"together at one rate); give the wiring ({name}=INPUT) if it is wrong"
+                )
+    return out
+
+
+# -- per-stream times -----------------------------------------------------------------
+
+
+def _arrival_times(
+    frames: DeviceFrames, to_session: Callable[[F64], F64], reason: str
+) -> StreamTiming:
+    """Fallback: dejittered arrival stamps, mapped to session time."""
+    spec = frames.spec
+    notes = [reason]
+    method = np.full(frames.seq.shape, "arrivals")
+    if frames.seq.shape[0] < 3:
+        notes.append("fewer than 3 frames: no times")
+        return StreamTiming(
+            frames.name, frames.seq, frames.ticks, np.full(frames.seq.shape, np.nan), method,
+            notes=notes, spec=spec,
+        )  # fmt: skip
+    res = dejitter_arrivals(frames.ticks, frames.arrival_ns * 1e-9, spec.tick_hz, allow_resets=True)
+    times = to_session(res.times_s)
+    return StreamTiming(
+        frames.name, frames.seq, frames.ticks, np.asarray(times, dtype=np.float64), method,
+        model=res.model, notes=notes, spec=spec,
+    )  # fmt: skip
+
+
+def _edge_times(dev: _Device, edges: _Edges, channel: int, origin: int) -> StreamTiming:
+    frames = dev.frames
+    fi, ej = _pairs(dev, edges)
+    if fi.shape[0] < 3:
+        raise ClockError(f"only {fi.shape[0]} frames paired with edges of timer input {channel}")
+    fi_order = np.argsort(fi, kind="stable")
+    fi, ej = fi[fi_order], ej[fi_order]
+    ref = (edges.tick[ej] - origin).astype(np.float64) / TIMER_TICK_HZ
+    model = fit_edges(frames.ticks[fi], ref, frames.spec.tick_hz, allow_resets=True)
+    times = model(frames.ticks)
+    method = np.full(frames.seq.shape, "model", dtype="<U12")
+    method[fi] = "edge"
+    epochs = model.epochs_of(frames.ticks)
+    pair_epochs = epochs[fi]
+    for e in np.unique(epochs):
+        rows = np.flatnonzero(epochs == e)
+        inside = pair_epochs == e
+        if not np.any(inside):
+            method[rows] = "extrapolated"
+            continue
+        lo, hi = frames.ticks[fi[inside]].min(), frames.ticks[fi[inside]].max()
+        out = (frames.ticks[rows] < lo) | (frames.ticks[rows] > hi)
+        method[rows[out]] = "extrapolated"
+    timing = StreamTiming(
+        frames.name, frames.seq, frames.ticks, times, method, model=model, channel=channel,
+        spec=frames.spec, pairs=int(fi.shape[0]),
+    )  # fmt: skip
+    n_ex = int(np.sum(method == "extrapolated"))
+    if n_ex:
+        timing.notes.append(
+            f"{n_ex} frames outside the span of their timer edges: times extrapolated by the "
+            "clock model"
+        )
+    for ev in model.events:
+        timing.notes.append(
+            f"clock {ev.kind} of {ev.size_s * 1e3:+.3f} ms at device tick {ev.at_tick}"
+        )
+    return timing
+
+
+def session_timebase(
+    devices: Sequence[DeviceFrames],
+    timer: TimerFrames | None,
+    wiring: Mapping[str, int] | None = None,
+) -> SessionTimebase:
+    """Session time of every frame of every stream of a recording.
+
+    Parameters
+    ----------
+    devices : sequence of DeviceFrames
+        Every device stream except the timer.
+    timer : TimerFrames or None
+        The timer stream; None: times from host arrival stamps only.
+    wiring : mapping of str to int, optional
+        Timer input of each stream's frame pulses; streams not named are matched to
+        the input whose edges follow their frames (in host time) best.
+
+    Returns
+    -------
+    SessionTimebase
+        A stream that cannot be timed from edges (no input, too few pairs, a bad clock)
+        falls back to arrival stamps with a note; it never changes another stream.
+
+    Raises
+    ------
+    SynchronisationError
+        If a timer is given without frames, or its counter goes backwards.
+    """
+    notes: list[str] = []
+    streams: dict[str, StreamTiming] = {}
+    if timer is None:
+        firsts = [int(d.arrival_ns[0]) for d in devices if d.arrival_ns.shape[0]]
+        origin = min(firsts) if firsts else 0
+        notes.append(
+            "no timer stream in the recording: session times come from host arrival stamps "
+            "(dejittered), millisecond-level, each stream biased by its transmission delay"
+        )
+
+        def host_seconds(host_s: F64) -> F64:
+            return np.asarray(host_s - origin * 1e-9, dtype=np.float64)
+
+        for d in devices:
+            streams[d.name] = _arrival_times(d, host_seconds, "no timer: arrival stamps")
+        return SessionTimebase("host", origin, streams, notes)
+
+    if timer.ticks.shape[0] < 3:
+        raise SynchronisationError(f"timer stream {timer.name!r} holds fewer than 3 frames")
+    if np.any(np.diff(timer.ticks) <= 0):
+        bad = int(np.flatnonzero(np.diff(timer.ticks) <= 0)[0]) + 1
+        raise SynchronisationError(
+            f"timer stream {timer.name!r}: counter does not increase at frame seq "
+            f"{int(timer.seq[bad])}; the timer was reset"
+        )
+    origin = int(timer.ticks[0])
+    t_rate = TIMER_TICK_HZ / float(np.median(np.diff(timer.ticks)))
+    timer_host = _host_times(timer.ticks, timer.arrival_ns, TIMER_TICK_HZ, t_rate)
+    streams[timer.name] = StreamTiming(
+        timer.name, timer.seq, timer.ticks,
+        (timer.ticks - origin).astype(np.float64) / TIMER_TICK_HZ,
+        np.full(timer.seq.shape, "reference", dtype="<U12"),
+    )  # fmt: skip
+
+    # host seconds -> session seconds through the timer's frames (earliest delivery)
+    def host_to_session(host_s: F64) -> F64:
+        x = (timer.ticks - origin).astype(np.float64) / TIMER_TICK_HZ
+        a, b = np.polyfit(timer_host - timer_host[0], x, 1)
+        return np.asarray(a * (host_s - timer_host[0]) + b, dtype=np.float64)
+
+    last_timer = float(timer.arrival_ns[-1]) * 1e-9
+    channels: dict[int, _Edges] = {}
+    for ch in np.unique(timer.edge_input):
+        got = _channel_edges(timer, int(ch), timer_host)
+        if got is not None and ch < 128:
+            channels[int(ch)] = got
+    prepared: dict[str, _Device] = {}
+    for d in devices:
+        if d.seq.shape[0] < 3:
+            streams[d.name] = _arrival_times(d, host_to_session, "fewer than 3 frames")
+            continue
+        prepared[d.name] = _device(d)
+        late = d.arrival_ns[-1] * 1e-9 - last_timer
+        if late > 1.0:
+            notes.append(
+                f"the timer stopped {late:.1f} s before the last frame of {d.name!r}: its later "
+                "frames are extrapolated by its clock model"
+            )
+    assigned = _assign_channels(prepared, channels, wiring or {}, notes)
+    for name, dev in prepared.items():
+        ch = assigned.get(name)
+        if ch is None:
+            streams[name] = _arrival_times(
+                dev.frames, host_to_session,
+                "no timer input follows this stream's frame pulses: times from arrival stamps "
+                "(millisecond-level, biased by the transmission delay)",
+            )  # fmt: skip
+            continue
+        try:
+            streams[name] = _edge_times(dev, channels[ch], ch, origin)
+        except (ClockError, SynchronisationError) as exc:
+            streams[name] = _arrival_times(
+                dev.frames, host_to_session, f"timer input {ch}: {exc}; times from arrival stamps"
+            )
+    order = [timer.name, *[d.name for d in devices]]
+    return SessionTimebase(timer.name, origin, {n: streams[n] for n in order}, notes)

@@ -1,0 +1,116 @@
+"""Session times of a recording: decode it, find the timer, build the time base, write CSV.
+
+Used by ``spotlab export --timestamps`` and ``spotlab replay``
+(:func:`spotlab.acquisition.timebase.session_timebase` does the numerics).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from spotlab.acquisition._replay_engine import Walk
+from spotlab.acquisition.timebase import (
+    DeviceFrames,
+    SessionTimebase,
+    TimerFrames,
+    session_timebase,
+)
+from spotlab.console.decoding import decoder_for
+from spotlab.console.errors import CommandError
+from spotlab.core.frames import FrameBlock
+from spotlab.core.streams import StreamSpec
+from spotlab.drivers.timer import extract_edges
+
+TIMER_FAMILY = "timer"
+
+
+def read_streams(
+    path: str | os.PathLike[str],
+) -> tuple[list[DeviceFrames], TimerFrames | None, dict[str, StreamSpec]]:
+    """Decode every stream of a recording into frame arrays (timer edges apart).
+
+    Raises
+    ------
+    CommandError
+        If the recording holds no decoded frames, or several timer streams.
+    """
+    blocks: dict[str, list[FrameBlock]] = {}
+    meta: dict[str, dict[str, object]] = {}
+    for kind, state, block in Walk(Path(path), decoder_for, strict=False).steps():
+        if kind == "block" and block is not None:
+            blocks.setdefault(state.name, []).append(block)
+            meta[state.name] = state.metadata
+    if not blocks:
+        raise CommandError(f"{path}: the recording holds no decoded frames")
+    devices: list[DeviceFrames] = []
+    timers: list[TimerFrames] = []
+    specs: dict[str, StreamSpec] = {}
+    for name, bl in blocks.items():
+        spec_d = meta[name].get("spec")
+        if not isinstance(spec_d, dict):
+            raise CommandError(f"{path}: stream {name!r} has no spec in its metadata")
+        spec = StreamSpec.from_dict(spec_d)
+        specs[name] = spec
+        seq, ticks, arrival = (
+            np.concatenate([getattr(b, f) for b in bl]) for f in ("seq", "ticks", "arrival_ns")
+        )
+        if meta[name].get("family") == TIMER_FAMILY:
+            edges = extract_edges(bl)
+            timers.append(
+                TimerFrames(
+                    name, seq, ticks, arrival,
+                    edges.input, edges.edge_index, edges.tick, edges.rising,
+                )
+            )  # fmt: skip
+        else:
+            devices.append(DeviceFrames(name, seq, ticks, arrival, spec))
+    if len(timers) > 1:
+        raise CommandError(
+            f"{path}: several timer streams ({', '.join(t.name for t in timers)}); "
+            "one timer is the session's reference"
+        )
+    return devices, (timers[0] if timers else None), specs
+
+
+def recording_timebase(
+    path: str | os.PathLike[str], wiring: Mapping[str, int] | None = None
+) -> SessionTimebase:
+    """The session time base of a recording (see :func:`session_timebase`)."""
+    devices, timer, _ = read_streams(path)
+    return session_timebase(devices, timer, wiring)
+
+
+def parse_wiring(items: list[str]) -> dict[str, int]:
+    """``STREAM=INPUT`` options as a mapping; CommandError when malformed."""
+    out: dict[str, int] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or not name:
+                raise ValueError
+            out[name] = int(value)
+        except ValueError:
+            raise CommandError(
+                f"--wiring {item!r}: expected STREAM=INPUT, e.g. selspot0=0"
+            ) from None
+    return out
+
+
+def write_timestamps(path: Path, timebase: SessionTimebase) -> int:
+    """Write one row per frame: stream, seq, time_s, device_ticks, method. Returns rows."""
+    rows = 0
+    with open(path, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["stream", "seq", "time_s", "device_ticks", "method"])
+        for s in timebase.streams.values():
+            for seq, t, tick, m in zip(
+                s.seq.tolist(), s.time_s.tolist(), s.ticks.tolist(), s.method.tolist(), strict=True
+            ):
+                out.writerow([s.name, seq, "nan" if not np.isfinite(t) else f"{t:.9f}", tick, m])
+                rows += 1
+    return rows
