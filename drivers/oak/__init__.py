@@ -1,0 +1,1 @@
+"""Luxonis OAK cameras through depthai as video-centroid mocap cameras."""

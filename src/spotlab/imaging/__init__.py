@@ -1,0 +1,1 @@
+"""Image numerics: blob centroids of thresholded camera frames (passive markers)."""
