@@ -45,6 +45,19 @@ class Normal3:
             is the reciprocal condition number within a factor of 3; 0 for singular
             ``A`` (parallel rays), NaN for an empty one.
         """
+        X, det, c00, c11, c22 = self._solve()
+        a00, _, _, a11, _, a22 = self.a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            conditioning = 3.0 * det / ((a00 + a11 + a22) * (c00 + c11 + c22))
+        return X, conditioning
+
+    def points(self) -> FloatArray:
+        """``A^-1 b`` of every system, shape (N, 3), without the conditioning of
+        :meth:`solve` (for intermediate passes)."""
+        return self._solve()[0]
+
+    def _solve(self) -> tuple[FloatArray, ...]:
+        """``A^-1 b`` (N, 3), ``det(A)`` and the diagonal cofactors (N,) by the adjugate."""
         a00, a01, a02, a11, a12, a22 = self.a
         b0, b1, b2 = self.b
         c00 = a11 * a22 - a12 * a12
@@ -60,5 +73,4 @@ class Normal3:
             X[:, 0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv
             X[:, 1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv
             X[:, 2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-            conditioning = 3.0 * det / ((a00 + a11 + a22) * (c00 + c11 + c22))
-        return X, conditioning
+        return X, det, c00, c11, c22

@@ -8,6 +8,7 @@ point's normal equations.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,8 +67,10 @@ class Views:
     x, y : ndarray, shape (C, N)
         Ideal normalised coordinates, 0 where unseen.
     seen : ndarray of bool, shape (C, N)
+    user_weights : ndarray, shape (C, N), or None
+        The caller's weights (None: 1).
     weights : ndarray, shape (C, N)
-        User weights, 0 where unseen.
+        User weights, 0 where unseen (computed on first use).
     """
 
     frame: Frame
@@ -76,7 +79,7 @@ class Views:
     x: FloatArray
     y: FloatArray
     seen: NDArray[np.bool_]
-    weights: FloatArray
+    user_weights: FloatArray | None
 
     @classmethod
     def build(
@@ -90,8 +93,14 @@ class Views:
         """Views of undistorted observations ``x, y`` (C, N) (see
         :func:`spotlab.reconstruction._rays.normalize_seen`); ``w`` (C, N) are the user
         weights (None: 1)."""
-        weights = seen.astype(np.float64) if w is None else np.where(seen, w, 0.0)
-        return cls(frame, frame.cameras, frame.t, x, y, seen, weights)
+        return cls(frame, frame.cameras, frame.t, x, y, seen, w)
+
+    @functools.cached_property
+    def weights(self) -> FloatArray:
+        """User weights, 0 where unseen, shape (C, N)."""
+        if self.user_weights is None:
+            return self.seen.astype(np.float64)
+        return np.where(self.seen, self.user_weights, 0.0)
 
     def depth(self, c: int, X: FloatArray) -> FloatArray:
         """Depth ``z_cam`` (mm) of centred points X (N, 3) in camera c."""
@@ -147,9 +156,12 @@ def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArra
     per ray: ``(w / m'm) (x^2, xy, x, y^2, y, 1)`` and ``w``.
     """
     C, N = views.seen.shape
-    x, y, w = views.x, views.y, views.weights
+    x, y = views.x, views.y
     Q = np.empty((C, 7, N))
-    wn = x * x
+    w = Q[:, 6]
+    np.copyto(w, views.seen if views.user_weights is None else views.weights)
+    wn = Q[:, 5]
+    np.multiply(x, x, out=wn)
     wn += y * y
     wn += 1.0
     np.divide(w, wn, out=wn)
@@ -158,20 +170,25 @@ def odle(views: Views, iterations: int, depth_weighted: bool) -> tuple[FloatArra
     np.multiply(Q[:, 2], y, out=Q[:, 1])
     np.multiply(wn, y, out=Q[:, 4])
     np.multiply(Q[:, 4], y, out=Q[:, 3])
-    Q[:, 5] = wn
-    Q[:, 6] = w
     frame = views.frame
     M = frame.odle_matrix
-    X, conditioning = _solve(_product(M, Q.reshape(7 * C, N)))
-    if depth_weighted:
-        for k in range(iterations):
-            z = frame.r3 @ X.T
-            z += views.t[:, 2:3]
-            z *= z
-            np.divide(frame.f2, z, out=z)
-            scaled = Q if k == iterations - 1 else np.empty_like(Q)
-            np.multiply(Q, z[:, None, :], out=scaled)
-            X, conditioning = _solve(_product(M, scaled.reshape(7 * C, N)))
+    passes = iterations if depth_weighted else 0
+    if passes:
+        X = _normal(_product(M, Q.reshape(7 * C, N))).points()
+    else:
+        X, conditioning = _normal(_product(M, Q.reshape(7 * C, N))).solve()
+    for k in range(passes):
+        z = frame.r3 @ X.T
+        z += views.t[:, 2:3]
+        z *= z
+        np.divide(frame.f2, z, out=z)
+        scaled = Q if k == passes - 1 else np.empty_like(Q)
+        np.multiply(Q, z[:, None, :], out=scaled)
+        normal = _normal(_product(M, scaled.reshape(7 * C, N)))
+        if k < passes - 1:
+            X = normal.points()
+        else:
+            X, conditioning = normal.solve()
     return X, conditioning
 
 
@@ -190,12 +207,12 @@ def _product(M: FloatArray, Q: FloatArray) -> FloatArray:
     return out
 
 
-def _solve(entries: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Solve normal equations given as 9 rows (6 of A, 3 of b), shape (9, N)."""
+def _normal(entries: FloatArray) -> Normal3:
+    """Normal equations given as 9 rows (6 of A, 3 of b), shape (9, N)."""
     normal = Normal3(0)
     normal.a = entries[:6]
     normal.b = entries[6:]
-    return normal.solve()
+    return normal
 
 
 def _add_rows(
