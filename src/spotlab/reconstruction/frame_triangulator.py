@@ -137,6 +137,32 @@ class FrameTriangulator:
             For ``uv`` of the wrong shape, infinite values, or pixels where the
             distortion has no inverse.
         """
+        x, y, seen = self.normalize(uv)
+        X, ray_px, n_views = self.solve(x, y, seen)
+        with np.errstate(invalid="ignore", divide="ignore"):  # points seen by no camera
+            rms = np.sqrt(np.where(seen, ray_px * ray_px, 0.0).sum(axis=0) / n_views)
+        rms[np.isnan(X[:, 0])] = np.nan
+        return X, rms, n_views
+
+    def normalize(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Ideal normalised coordinates of the observations of one frame.
+
+        Parameters
+        ----------
+        uv : array_like, shape (C, N, 2)
+            Distorted pixel coordinates per camera; NaN where unseen.
+
+        Returns
+        -------
+        x, y : ndarray, shape (C, N)
+            Undistorted normalised coordinates; 0 where unseen.
+        seen : ndarray of bool, shape (C, N)
+
+        Raises
+        ------
+        ReconstructionError
+            As :meth:`__call__`.
+        """
         arr = np.asarray(uv, dtype=np.float64)
         C = len(self.rig)
         if arr.ndim != 3 or arr.shape[0] != C or arr.shape[2] != 2:
@@ -145,7 +171,6 @@ class FrameTriangulator:
             raise ReconstructionError("uv holds infinite values: mark unseen points with NaN")
         u, v = arr[..., 0], arr[..., 1]
         seen = np.isfinite(u) & np.isfinite(v)
-        n_views = seen.sum(axis=0)
         if self._skewed:
             x, y = _rays.normalize_seen(self._frame.lenses, arr, seen)
         else:
@@ -156,6 +181,31 @@ class FrameTriangulator:
             x, y = stack.normalize(u, v)
             x[~seen] = 0.0
             y[~seen] = 0.0
+        return x, y, seen
+
+    def solve(
+        self, x: FloatArray, y: FloatArray, seen: NDArray[np.bool_]
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+        """Points from undistorted normalised observations (as :meth:`normalize` gives).
+
+        Parameters
+        ----------
+        x, y : ndarray, shape (C, N)
+            Ideal normalised coordinates; any finite value where unseen.
+        seen : ndarray of bool, shape (C, N)
+
+        Returns
+        -------
+        X : ndarray, shape (N, 3)
+            World points (mm), NaN as in :meth:`__call__`.
+        ray_px : ndarray, shape (C, N)
+            Distance between each seen ray and its point in undistorted pixels; NaN
+            where unseen or where ``X`` is NaN.
+        n_views : ndarray of int, shape (N,)
+        """
+        n_views = seen.sum(axis=0)
+        x = np.where(seen, x, 0.0)
+        y = np.where(seen, y, 0.0)
         views = _solvers.Views.build(self._frame, x, y, seen, None)
         with np.errstate(divide="ignore", invalid="ignore"):  # unseen points: masked below
             X, conditioning = _solvers.odle(views, 1, True)
@@ -164,10 +214,10 @@ class FrameTriangulator:
             Xc += self._frame.t[:, :, None]
             ex = Xc[:, 0] / Xc[:, 2] - x
             ey = Xc[:, 1] / Xc[:, 2] - y
-            err2 = (ex * ex + ey * ey) * self._frame.f2
-            rms = np.sqrt(np.where(seen, err2, 0.0).sum(axis=0) / n_views)
+            ray_px = np.sqrt((ex * ex + ey * ey) * self._frame.f2)
         bad = (n_views < 2) | ~(conditioning >= self.min_conditioning)
         X[bad] = np.nan
-        rms[bad] = np.nan
+        ray_px[:, bad] = np.nan
+        ray_px[~seen] = np.nan
         X += self._origin
-        return X, rms, n_views
+        return X, ray_px, n_views
