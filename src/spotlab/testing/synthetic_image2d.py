@@ -5,12 +5,16 @@ at most 78 Hz): C cameras x M markers at any rate, all markers sampled at once (
 video cameras on a shared frame pulse). Frames are the projections of markers moving
 on known paths (:meth:`SyntheticImage2d.truth`) through a rig, plus Gaussian noise.
 
+The image coordinates of ``period`` frames are computed at :meth:`start` and repeat
+(the device's work, which a real device does not do on the host): the paths are
+periodic with ``period`` frames (:meth:`truth` folds ``seq`` the same way).
+
 Pacing: frame ``k`` is due at ``t0 + k / rate`` on ``time.monotonic_ns``. ``recv``
-computes the frame ahead of time (the device's work, not the host's), waits until it
-is due, takes the arrival stamp then (the instant a real link would have delivered the
-frame's last byte) and only then packs the :class:`FrameBlock`. Several devices built
-with the same ``t0_ns`` take their frames at the same instants with the same ticks:
-synchronised systems on one frame pulse. No wire bytes: taps see only start and stop.
+waits until it is due, takes the arrival stamp then (the instant a real link would
+have delivered the frame's last byte) and only then packs the :class:`FrameBlock`.
+Several devices built with the same ``t0_ns`` take their frames at the same instants
+with the same ticks: synchronised systems on one frame pulse. No wire bytes: taps see
+only start and stop.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.core.errors import DeviceError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.core.streams import StreamSpec
@@ -58,6 +63,8 @@ class SyntheticImage2d:
     paths_seed : int, optional
         Seed of the marker paths (default ``seed``): devices with the same paths seed
         and ``centre`` see the same markers.
+    period : int
+        Frames after which the motion repeats (default 600: 2 s at 300 Hz).
     centre : ndarray, shape (3,), optional
         Middle of the markers' volume, mm (default: in front of the rig's cameras,
         60 % of the way from their centroid to the first camera's distance).
@@ -76,6 +83,7 @@ class SyntheticImage2d:
         paced: bool = True,
         paths_seed: int | None = None,
         centre: FloatArray | None = None,
+        period: int = 600,
     ) -> None:
         self.rig = rig
         self.name = name
@@ -98,7 +106,8 @@ class SyntheticImage2d:
         self._phase = paths.uniform(0.0, 2.0 * np.pi, (n_markers, 3))
         self._taps: list[WireTap] = []
         self._seq = 0
-        self._next: FloatArray | None = None
+        self.period = int(period)
+        self._frames: FloatArray | None = None
         self._stop = threading.Event()
         self._spec = StreamSpec(
             name=name,
@@ -119,7 +128,7 @@ class SyntheticImage2d:
 
     def truth(self, seq: int) -> FloatArray:
         """True marker positions of frame ``seq``, mm, shape (M, 3)."""
-        t = seq / self.rate_hz
+        t = (seq % self.period) / self.rate_hz
         return np.asarray(self._base + self._amp * np.sin(self._freq * t + self._phase))
 
     def _frame(self, seq: int) -> FloatArray:
@@ -132,7 +141,8 @@ class SyntheticImage2d:
         self._stop.clear()
         self.t0_ns = time.monotonic_ns() if self._t0_fixed is None else self._t0_fixed
         self._seq = 0
-        self._next = None
+        if self._frames is None:
+            self._frames = np.stack([self._frame(k) for k in range(self.period)])
         for tap in self._taps:
             tap.on_event(self.name, "started", {}, time.monotonic_ns())
 
@@ -159,8 +169,8 @@ class SyntheticImage2d:
         if self._stop.is_set():
             return None
         seq = self._seq
-        if self._next is None:
-            self._next = self._frame(seq)  # the device's work, before the frame is due
+        if self._frames is None:
+            raise DeviceError(f"{self.name}: recv before start")
         due = self.t0_ns + round(seq * 1e9 / self.rate_hz)
         if self.paced:
             wait_ns = due - time.monotonic_ns()
@@ -172,7 +182,7 @@ class SyntheticImage2d:
             while time.monotonic_ns() < due:
                 pass
         arrival = time.monotonic_ns()
-        data = self._next
+        data = self._frames[seq % self.period]
         block = FrameBlock(
             seq=np.array([seq], dtype=np.int64),
             ticks=np.array([round(seq * TICK_HZ / self.rate_hz)], dtype=np.int64),
@@ -183,5 +193,4 @@ class SyntheticImage2d:
         )
         self._seq = seq + 1
         self.stats.frames += 1
-        self._next = None
         return block
