@@ -26,7 +26,7 @@ import logging
 import os
 import time
 from abc import abstractmethod
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, Protocol
 
 from serial.tools import list_ports
@@ -43,6 +43,7 @@ from spotlab.core.stats import LinkStats
 from spotlab.core.wire import LinkEventKind
 from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.mcs1.commands import (
+    BAUD_CODES,
     RESET_BAUD,
     DeviceConfigurationError,
     Reply,
@@ -134,6 +135,8 @@ class Mcs1Driver(Driver):
     """
 
     family_code: ClassVar[str] = ""
+    #: Baud rate -> ``COMM`` code the family's devices accept.
+    baud_codes: ClassVar[Mapping[int, int]] = BAUD_CODES
     #: The family's configuration (set by the subclass before :meth:`_setup`).
     config: Mcs1Config
     _decoder: Mcs1Decoder
@@ -222,7 +225,7 @@ class Mcs1Driver(Driver):
 
     def _configure_and_start(self) -> None:
         c = self.config
-        reply = self._channel.negotiate(c.baud, self.family_code)
+        reply = self._channel.negotiate(c.baud, self.family_code, self.baud_codes)
         self._tap_event("baud_change", baud=c.baud)
         self._check_device(reply)
         for verb, args in c.commands():

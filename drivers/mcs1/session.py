@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Mapping
 
 from spotlab.core.errors import DeviceTimeout, ProtocolError
 from spotlab.core.stats import LinkStats
@@ -268,15 +269,20 @@ class CommandChannel:
         return self.read_reply(command, data_prefix, timeout).raise_for_error(command)
 
     # -- baud rate -----------------------------------------------------------------
-    def negotiate(self, baud: int, family_code: str) -> Reply:
+    def negotiate(
+        self, baud: int, family_code: str, codes: Mapping[int, int] = BAUD_CODES
+    ) -> Reply:
         """Move the link from 9600 baud to ``baud`` and check it with ``VER:0``.
 
         Parameters
         ----------
         baud : int
-            Target rate, one of :data:`~spotlab.drivers.mcs1.commands.BAUD_CODES`.
+            Target rate, one of ``codes``.
         family_code : str
             First word of the ``VER:0`` reply (``"SPX"``).
+        codes : mapping of int to int
+            Baud rate -> ``COMM`` code; :data:`~spotlab.drivers.mcs1.commands.BAUD_CODES`
+            unless the family has more (CEN: 6 and 12 Mbaud).
 
         Returns
         -------
@@ -291,7 +297,7 @@ class CommandChannel:
             If the answer is not the expected family's.
         """
         if baud != RESET_BAUD:
-            command = self.send("COMM", str(BAUD_CODES[baud]))
+            command = self.send("COMM", str(codes[baud]))
             self.read_reply(command, ignore_banner=True).raise_for_error(command)
             self.link.set_baud(baud)
         command = self.send("VER", "0")
