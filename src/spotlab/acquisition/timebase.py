@@ -397,7 +397,7 @@ def _assign_channels(
 def _arrival_times(
     frames: DeviceFrames, to_session: Callable[[F64], F64], reason: str
 ) -> StreamTiming:
-    """Fallback: dejittered arrival stamps, mapped to session time."""
+    """Fallback: dejittered arrival stamps (their lower envelope), mapped to session time."""
     spec = frames.spec
     notes = [reason]
     method = np.full(frames.seq.shape, "arrivals")
@@ -407,8 +407,12 @@ def _arrival_times(
             frames.name, frames.seq, frames.ticks, np.full(frames.seq.shape, np.nan), method,
             notes=notes, spec=spec,
         )  # fmt: skip
-    res = dejitter_arrivals(frames.ticks, frames.arrival_ns * 1e-9, spec.tick_hz, allow_resets=True)
-    times = to_session(res.times_s)
+    # the lower envelope first: frames queued before the reader started (or behind a busy
+    # host) arrive late in bursts, which would bend the recursive line fit
+    span = (spec.slot_period_s or 0.0) * spec.n_markers
+    host = _host_times(frames.ticks, frames.arrival_ns, spec.tick_hz, spec.rate_hz) - span
+    res = dejitter_arrivals(frames.ticks, host, spec.tick_hz, allow_resets=True)
+    times = to_session(res.model(frames.ticks))
     return StreamTiming(
         frames.name, frames.seq, frames.ticks, np.asarray(times, dtype=np.float64), method,
         model=res.model, notes=notes, spec=spec,
@@ -492,6 +496,8 @@ def session_timebase(
             "no timer stream in the recording: session times come from host arrival stamps "
             "(dejittered), millisecond-level, each stream biased by its transmission delay"
         )
+        if wiring:
+            notes.append(f"timer wiring of {', '.join(sorted(wiring))} ignored: no timer")
 
         def host_seconds(host_s: F64) -> F64:
             return np.asarray(host_s - origin * 1e-9, dtype=np.float64)
