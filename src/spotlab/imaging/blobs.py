@@ -16,8 +16,9 @@ __all__ = ["FLAG_EDGE", "FLAG_SATURATED", "FLAG_TOO_MANY", "Blobs", "find_blobs"
 FLAG_SATURATED = 1
 #: The blob touches the image border: part of it may be cut off.
 FLAG_EDGE = 2
-#: The frame had more blobs than ``max_blobs``: only the brightest were kept.
-FLAG_TOO_MANY = 4
+#: The frame had more blobs than ``max_blobs``: only the brightest were kept. (Bit 2, 4, is
+#: left for "merged", as in docs/protocols/centroid.md §4.)
+FLAG_TOO_MANY = 8
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
