@@ -223,6 +223,16 @@ def test_clock_backwards_and_stalled_stream_reported_others_unharmed(tmp_path: P
     res = affine_residuals(lab, rows, ["timer", "selspot0", "selspot1"])
     for name, r in res.items():
         assert np.max(np.abs(r)) < TOLERANCE_S, (name, np.max(np.abs(r)))
+    # spotlab replay decodes it again and reports the same clocks
+    out = run_cli(
+        "replay", lab.journal, "--json", "--wiring", "selspot0=0", "--wiring", "selspot1=1"
+    )
+    assert out.returncode == 0, out.stderr
+    replayed = json.loads(out.stdout)
+    assert {s["name"] for s in replayed["streams"]} == {"timer", "selspot0", "selspot1"}
+    sync = {s["stream"]: s for s in replayed["sync"]["streams"]}
+    assert [e["kind"] for e in sync["selspot0"]["events"]] == ["reset"]
+    assert replayed["session_span"]["timer"]["first_s"] == 0.0
 
 
 @pytest.mark.timeout(60)

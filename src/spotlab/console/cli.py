@@ -27,6 +27,7 @@ COMMANDS: tuple[str, ...] = (
     "sim",
     "record",
     "info",
+    "replay",
     "calibrate",
     "reconstruct",
     "export",
