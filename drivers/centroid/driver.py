@@ -1,0 +1,156 @@
+"""The CEN video-centroid hub driver (centroid.md §6): MCS-1 state machine, hub set-up.
+
+:class:`CentroidDriver` resets, negotiates (CEN accepts 6 and 12 Mbaud too),
+checks ``VER:0`` (``CEN``, enough cameras, blob cap, 1 MHz camera clocks), sends
+``RATE``, ``CAMS``, ``EXPO``, ``THRS`` and ``BLOB`` and starts the stream;
+recovery is :class:`Mcs1Driver`'s.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, ClassVar
+
+from spotlab.core.errors import ConfigurationError
+from spotlab.core.streams import StreamSpec
+from spotlab.drivers.base import DeviceInfo
+from spotlab.drivers.centroid.config import CEN_BAUD_CODES, CentroidConfig
+from spotlab.drivers.centroid.protocol import (
+    FAMILY_CODE,
+    TICK_HZ,
+    UNITS,
+    VALUES,
+    CentroidDecoder,
+    CentroidVersion,
+    parse_version,
+)
+from spotlab.drivers.mcs1.commands import Reply
+from spotlab.drivers.mcs1.driver import Mcs1Driver
+
+
+class CentroidDriver(Mcs1Driver):
+    """Driver of a CEN video-centroid hub.
+
+    Parameters
+    ----------
+    port : str or path-like
+        Device path or pyserial URL (``sim://centroid?...``).
+    name : str, optional
+        Stream name; ``"centroid"`` by default.
+    cameras : int, optional
+        Enable cameras 0 .. cameras-1 (default 8); or give ``camera_mask``.
+    camera_mask : int, optional
+        Enabled cameras as a bit mask.
+    rate_hz : float
+        Frame rate in Hz (default 100).
+    exposure_us, threshold, max_blobs : int
+        ``EXPO``, ``THRS`` and ``BLOB`` (defaults 500 µs, 128, 256).
+    baud : int or "auto"
+        Line rate while streaming (default 12 Mbaud).
+    reply_timeout, reconnect_timeout : float
+        As :class:`~spotlab.drivers.mcs1.driver.Mcs1Driver`.
+
+    Raises
+    ------
+    ConfigurationError
+        If the configuration is out of range.
+    BandwidthError
+        If frames without blobs do not fit ``baud`` or the longest frame is too long.
+    """
+
+    family = "centroid"
+    family_code = FAMILY_CODE
+    baud_codes: ClassVar[dict[int, int]] = CEN_BAUD_CODES
+    config: CentroidConfig
+    _decoder: CentroidDecoder
+
+    def __init__(
+        self,
+        port: str | os.PathLike[str],
+        *,
+        name: str | None = None,
+        cameras: int | None = None,
+        camera_mask: int | None = None,
+        rate_hz: float = 100.0,
+        exposure_us: int = 500,
+        threshold: int = 128,
+        max_blobs: int = 256,
+        baud: int | str = 12_000_000,
+        reply_timeout: float = 1.0,
+        reconnect_timeout: float | None = None,
+    ) -> None:
+        super().__init__(port, name=name)
+        self.config = CentroidConfig.create(
+            cameras=cameras, camera_mask=camera_mask, rate_hz=rate_hz, exposure_us=exposure_us,
+            threshold=threshold, max_blobs=max_blobs, baud=baud,
+        )  # fmt: skip
+        #: What the hub said of itself (``VER:0``), once started.
+        self.device: CentroidVersion | None = None
+        self._setup(
+            self.config,
+            CentroidDecoder(self.config, stats=self.stats),
+            reply_timeout,
+            reconnect_timeout,
+        )
+
+    @property
+    def spec(self) -> StreamSpec:
+        """The stream: ``blobs2d``, camera columns, hub ticks in µs (layout: protocol.py)."""
+        c = self.config
+        return StreamSpec(
+            name=self.name,
+            kind="blobs2d",
+            n_sensors=c.n_columns,
+            n_markers=c.max_blobs + 1,
+            rate_hz=c.rate_hz,
+            tick_hz=float(TICK_HZ),
+            slot_period_s=None,
+            values=VALUES,
+            units=UNITS,
+            metadata={"config": c.to_dict(), "layout": "cen-blobs-v1"},
+        )
+
+    def metadata(self) -> dict[str, Any]:
+        """Everything a recording needs to decode this stream again."""
+        return {
+            **super().metadata(),
+            "config": self.config.to_dict(),
+            "device": None if self.device is None else self.device.to_dict(),
+            "protocol": {"transport": "MCS-1", "family_code": FAMILY_CODE, "version": 1},
+            "decoder": "spotlab.drivers.centroid:decoder_from_metadata",
+        }
+
+    @property
+    def decoder(self) -> CentroidDecoder:
+        """The decoder fed by this driver (its ``stats`` are the driver's)."""
+        return self._decoder
+
+    # -- family hooks ----------------------------------------------------------------
+    def _check_device(self, reply: Reply) -> None:
+        self.device = parse_version(reply.text)
+        c = self.config
+        if self.device.cameras < c.n_columns or self.device.max_blobs < c.max_blobs:
+            raise ConfigurationError(
+                f"the hub on {self.port} ({reply.text}) has {self.device.cameras} cameras and "
+                f"a cap of {self.device.max_blobs} blobs; asked for cameras {list(c.cameras)} "
+                f"and {c.max_blobs} blobs"
+            )
+        if self.device.tick_hz != TICK_HZ:
+            raise ConfigurationError(
+                f"the hub on {self.port} stamps at {self.device.tick_hz} Hz, not {TICK_HZ}"
+            )
+
+    def _describe_load(self) -> str:
+        c = self.config
+        return f"{c.n_enabled} cameras at {c.rate_hz:g} Hz"
+
+    @classmethod
+    def _device_info(cls, port: str, text: str) -> DeviceInfo:
+        version = parse_version(text)
+        return DeviceInfo(
+            family=cls.family,
+            port=port,
+            description=version.text,
+            serial_number=version.serial_number,
+            extra={"firmware": version.firmware, "cameras": version.cameras},
+        )
