@@ -116,8 +116,8 @@ class StreamTiming:
     time_s : ndarray of float64, shape (F,)
         Session time of each frame's first sample, s.
     method : ndarray of str, shape (F,)
-        Per frame: ``reference`` (the timer's own frames), ``edge`` (the frame's own
-        edge was fitted), ``model`` (between fitted edges: its edge was lost),
+        Per frame: ``reference`` (the timer's own frames), ``edge`` (the time of the
+        frame's own edge), ``model`` (between fitted edges: its edge was lost),
         ``extrapolated`` (outside the span of its clock segment's edges), ``arrivals``.
     model : ClockModel or None
         Device ticks to session seconds (None for the timer).
@@ -429,6 +429,9 @@ def _edge_times(dev: _Device, edges: _Edges, channel: int, origin: int) -> Strea
     ref = (edges.tick[ej] - origin).astype(np.float64) / TIMER_TICK_HZ
     model = fit_edges(frames.ticks[fi], ref, frames.spec.tick_hz, allow_resets=True)
     times = model(frames.ticks)
+    # a frame with its own edge takes the edge's time: the pulse is the frame's instant,
+    # the device tick may carry trigger jitter and is rounded to the device's tick
+    times[fi] = ref
     method = np.full(frames.seq.shape, "model", dtype="<U12")
     method[fi] = "edge"
     epochs = model.epochs_of(frames.ticks)
