@@ -19,6 +19,7 @@ DRIVERS: dict[str, tuple[str, str]] = {
     "timer": ("spotlab.drivers.timer", "TimerDriver"),
     "centroid": ("spotlab.drivers.centroid", "CentroidDriver"),
     "lsl": ("spotlab.drivers.lsl", "LslInletDriver"),
+    "oak": ("spotlab.drivers.oak", "OakDriver"),
 }
 
 
