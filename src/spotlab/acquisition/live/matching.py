@@ -126,6 +126,8 @@ class FrameMatcher(Generic[T]):
 
     @staticmethod
     def default_tolerances(rates_hz: Sequence[float]) -> tuple[float, float]:
-        """A quarter and three times the longest frame period of ``rates_hz``, s."""
+        """Tolerance and wait, s: a quarter of the longest frame period of ``rates_hz``,
+        and three periods but at least 20 ms (a reader thread of a busy machine can be
+        descheduled for 10 ms: waiting less splits a pair of frames into two halves)."""
         period = 1.0 / min(rates_hz)
-        return 0.25 * period, 3.0 * period
+        return 0.25 * period, max(3.0 * period, 0.02)

@@ -54,6 +54,7 @@ def test_matcher_configuration_errors() -> None:
     with pytest.raises(ConfigurationError, match="positive"):
         FrameMatcher[int](2, 0.0, 0.01)
     assert FrameMatcher.default_tolerances([300.0, 100.0]) == (0.0025, 0.03)
+    assert FrameMatcher.default_tolerances([300.0]) == (0.25 / 300.0, 0.02)
 
 
 def test_latency_percentiles_from_the_histogram() -> None:
