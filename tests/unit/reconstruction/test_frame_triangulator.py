@@ -73,3 +73,15 @@ def test_bad_input_is_refused() -> None:
         tri(uv)
     with pytest.raises(ReconstructionError, match="Rig"):
         FrameTriangulator("rig")  # type: ignore[arg-type]
+
+
+def test_observations_outside_the_fitted_start_take_more_newton_steps() -> None:
+    rig, _, uv = _scene(3)
+    # Beyond the 3 % margin of the start fit: the slow path, camera by camera.
+    uv[2, 4] = [-150.0, -120.0]
+    uv[5, 9] = [1280.0 + 140.0, 1024.0 + 100.0]
+    x, y, seen = FrameTriangulator(rig).normalize(uv)
+    assert seen.all()
+    for c, n in ((2, 4), (5, 9), (0, 0)):
+        want = rig.cameras[c].normalize(uv[c, n][None])[0]
+        np.testing.assert_allclose([x[c, n], y[c, n]], want, atol=1e-10)
