@@ -1,0 +1,33 @@
+"""Marker identification for passive markers: blobs of several cameras -> labelled points.
+
+Correspondence between cameras (:mod:`.correspondence`), tracking in time
+(:mod:`.tracking`), labels from a marker model (:mod:`.model`, :mod:`.labelling`), all
+driven frame by frame by :class:`Identifier`. Methods and measured figures:
+``docs/identification.md``.
+"""
+
+from spotlab.reconstruction.identification.blobs import BlobFrame
+from spotlab.reconstruction.identification.correspondence import Correspondence, match_blobs
+from spotlab.reconstruction.identification.geometry import RigGeometry
+from spotlab.reconstruction.identification.identifier import (
+    FLOODED,
+    NO_BLOBS,
+    UNUSABLE,
+    IdentifiedFrame,
+    Identifier,
+)
+from spotlab.reconstruction.identification.model import MarkerModel, Segment
+
+__all__ = [
+    "FLOODED",
+    "NO_BLOBS",
+    "UNUSABLE",
+    "BlobFrame",
+    "Correspondence",
+    "IdentifiedFrame",
+    "Identifier",
+    "MarkerModel",
+    "RigGeometry",
+    "Segment",
+    "match_blobs",
+]

@@ -1,0 +1,158 @@
+"""The rig as identification sees it: normalised image coordinates, epipolar geometry.
+
+Blobs are undistorted once (:meth:`FrameTriangulator.normalize`); everything after
+works on ideal normalised coordinates ``(x, y)`` where the pinhole model is exact, so
+epipolar lines are straight (essential matrices, Hartley & Zisserman 2004, §9.6) and
+distances are turned into undistorted pixels by each camera's principal distance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.geometry import Rig
+from spotlab.reconstruction.frame_triangulator import FrameTriangulator
+
+__all__ = ["RigGeometry"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _cross_matrix(v: FloatArray) -> FloatArray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+class RigGeometry:
+    """Per-rig constants of identification, built once.
+
+    Parameters
+    ----------
+    rig : Rig
+        Calibrated cameras (mm).
+
+    Attributes
+    ----------
+    triangulator : FrameTriangulator
+    R : ndarray, shape (C, 3, 3)
+    t : ndarray, shape (C, 3)
+    f : ndarray, shape (C,)
+        Principal distance (px) that turns normalised distances into pixels.
+    E : ndarray, shape (C, C, 3, 3)
+        Essential matrices: ``[x_j, 1] E[i, j] [x_i, 1]' = 0`` for the images of one
+        point in cameras ``i`` and ``j``.
+    centers : ndarray, shape (C, 3)
+        Perspective centres (mm).
+    """
+
+    def __init__(self, rig: Rig) -> None:
+        self.rig = rig
+        self.triangulator = FrameTriangulator(rig)
+        self.R = np.stack([cam.R for cam in rig])
+        self.t = np.stack([cam.t for cam in rig])
+        self.f = np.array([np.sqrt(cam.K[0, 0] * cam.K[1, 1]) for cam in rig])
+        self.centers = np.stack([cam.center for cam in rig])
+        C = len(rig)
+        self.E = np.zeros((C, C, 3, 3))
+        for i in range(C):
+            for j in range(C):
+                if i != j:
+                    R_ij = self.R[j] @ self.R[i].T
+                    t_ij = self.t[j] - R_ij @ self.t[i]
+                    self.E[i, j] = _cross_matrix(t_ij) @ R_ij
+
+    def __len__(self) -> int:
+        return int(self.R.shape[0])
+
+    def normalize(
+        self, uv: FloatArray, camera: NDArray[np.intp]
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Ideal normalised coordinates of stacked blobs.
+
+        Parameters
+        ----------
+        uv : ndarray, shape (N, 2)
+            Distorted pixels.
+        camera : ndarray of int, shape (N,)
+
+        Returns
+        -------
+        xy : ndarray, shape (N, 2)
+        ok : ndarray of bool, shape (N,)
+            False where the lens model has no inverse at the pixel (far outside the
+            calibrated image).
+        """
+        C = len(self)
+        n = uv.shape[0]
+        counts = np.bincount(camera, minlength=C)
+        width = max(1, int(counts.max()) if n else 1)
+        order = np.argsort(camera, kind="stable")
+        slot = np.empty(n, dtype=np.intp)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot[order] = np.arange(n) - np.repeat(starts, counts)
+        padded = np.full((C, width, 2), np.nan)
+        padded[camera, slot] = uv
+        x, y, seen = self.triangulator.normalize(padded)
+        xy = np.stack([x[camera, slot], y[camera, slot]], axis=1)
+        ok = seen[camera, slot] & np.isfinite(xy).all(axis=1)
+        return xy, ok
+
+    def project(self, X: FloatArray) -> FloatArray:
+        """Normalised coordinates of world points in every camera.
+
+        Parameters
+        ----------
+        X : ndarray, shape (N, 3)
+            World points (mm), NaN allowed.
+
+        Returns
+        -------
+        ndarray, shape (C, N, 2)
+            NaN behind a camera or for NaN points.
+        """
+        Xc = np.einsum("cij,nj->cni", self.R, X) + self.t[:, None, :]
+        z = Xc[..., 2:3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(z > 0.0, Xc[..., :2] / z, np.nan)
+
+    def triangulate(
+        self, xy: FloatArray, seen: NDArray[np.bool_], *, max_ray_px: float, min_views: int = 2
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Points from matched rays, dropping the worst ray of a point while it is an outlier.
+
+        Parameters
+        ----------
+        xy : ndarray, shape (C, K, 2)
+            Normalised coordinates of the ray of camera ``c`` for point ``k``.
+        seen : ndarray of bool, shape (C, K)
+            Which rays exist.
+        max_ray_px : float
+            Largest accepted distance between a ray and its point (undistorted px).
+        min_views : int
+            Points left with fewer rays are NaN.
+
+        Returns
+        -------
+        X : ndarray, shape (K, 3)
+            Points (mm); NaN where fewer than ``min_views`` consistent rays remain.
+        ray_px : ndarray, shape (C, K)
+            Ray errors (px) of the kept rays, NaN elsewhere.
+        kept : ndarray of bool, shape (C, K)
+            The rays that support each point.
+        """
+        kept = seen.copy()
+        x, y = xy[..., 0], xy[..., 1]
+        while True:
+            X, ray_px, n_views = self.triangulator.solve(x, y, kept)
+            worst = np.where(kept, np.nan_to_num(ray_px, nan=np.inf), -1.0)
+            c = np.argmax(worst, axis=0)
+            k = np.flatnonzero(worst[c, np.arange(c.size)] > max_ray_px)
+            if k.size == 0:
+                break
+            kept[c[k], k] = False
+        n_views = kept.sum(axis=0)
+        bad = (n_views < min_views) | np.isnan(X[:, 0])
+        X[bad] = np.nan
+        kept[:, bad] = False
+        ray_px[~kept] = np.nan
+        return X, ray_px, kept

@@ -1,0 +1,323 @@
+"""Frame-by-frame identification: blobs -> labelled 3-D markers.
+
+One :class:`Identifier` per recording or live stream. Per frame:
+
+1. cameras with more blobs than ``max_blobs`` (sunlight, a lamp) or flagged unusable
+   by the caller are left out of the frame and flagged;
+2. blobs are undistorted once; tracked points are predicted, projected and given their
+   blobs (:func:`.tracking.associate`), then triangulated with outlier rays dropped;
+3. blobs no track explains are matched across cameras (:func:`.match_blobs`) into new
+   unlabelled tracks; those below the floor are reflections (ghosts), tracked but never
+   labelled;
+4. labels are checked against their clusters and given to unlabelled points
+   (:mod:`.labelling`);
+5. over every ``check_frames`` frames, a camera whose blobs the others hardly ever
+   confirm means the calibration does not match the cameras: a :class:`CalibrationError`
+   names it rather than labels being made up from the rest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.core.errors import CalibrationError, ReconstructionError
+from spotlab.geometry import Rig
+from spotlab.reconstruction.identification.blobs import BlobFrame
+from spotlab.reconstruction.identification.correspondence import match_blobs
+from spotlab.reconstruction.identification.geometry import RigGeometry
+from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
+from spotlab.reconstruction.identification.model import MarkerModel
+from spotlab.reconstruction.identification.tracking import Tracks, associate
+
+__all__ = ["FLOODED", "NO_BLOBS", "UNUSABLE", "IdentifiedFrame", "Identifier"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+#: Camera flags of an :class:`IdentifiedFrame`.
+FLOODED = 1  # more blobs than max_blobs: left out of the frame
+UNUSABLE = 2  # flagged by the caller (offline, overflow)
+NO_BLOBS = 4  # no blob at all
+
+
+@dataclass(frozen=True)
+class IdentifiedFrame:
+    """Labelled markers of one frame.
+
+    Attributes
+    ----------
+    points : ndarray, shape (M, 3)
+        Marker positions (mm) in the model's label order; NaN where a marker was not
+        reconstructed (a flagged gap, never a guess).
+    residual_px : ndarray, shape (M,)
+        RMS ray error of each marker (undistorted px), NaN where missing.
+    n_cameras : ndarray of int, shape (M,)
+        Cameras whose rays made each marker.
+    unlabelled : int
+        Points reconstructed but given no label (not reported).
+    ghosts : int
+        Points rejected as reflections (below the floor).
+    camera_flags : ndarray of int, shape (C,)
+        ``FLOODED``, ``UNUSABLE``, ``NO_BLOBS`` bits per camera.
+    """
+
+    points: FloatArray
+    residual_px: FloatArray
+    n_cameras: IntArray
+    unlabelled: int
+    ghosts: int
+    camera_flags: IntArray
+
+
+class Identifier:
+    """Label the markers of a marker model in blob frames of a calibrated rig.
+
+    Parameters
+    ----------
+    rig : Rig
+        The calibration (mm) of the cameras, in the order of the blobs' camera indices.
+    model : MarkerModel
+        Markers and rigid clusters to label.
+    floor_mm : float or None
+        Height of the floor; points below it are reflections. None: no floor.
+    gate_px : float
+        Association gate of a track seen in the previous frame (undistorted px); it
+        grows by this much per missed frame.
+    ray_px : float
+        Largest ray error of a kept ray (undistorted px); about 5x the centroid noise.
+    epipolar_px : float
+        Gate of the epipolar search for new points (px).
+    min_cameras : int
+        Cameras a new point needs (a tracked one needs 2).
+    bridge_frames : int
+        Frames a track is carried through without measurement before it is deleted.
+    tol_mm, rms_mm, margin_mm : float
+        Cluster checks: tolerance of model distances, largest RMS of an accepted
+        identity, smallest lead over the runner-up (see :func:`.assign_labels`).
+    max_blobs : int
+        More blobs than this in one camera and frame leave the camera out of the frame.
+    check_frames : int
+        Window of the calibration check (frames); 0 turns it off.
+
+    Raises
+    ------
+    ReconstructionError
+        For a rig that is not a Rig or options out of range.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        model: MarkerModel,
+        *,
+        floor_mm: float | None = 0.0,
+        gate_px: float = 3.0,
+        ray_px: float = 1.0,
+        epipolar_px: float = 1.5,
+        min_cameras: int = 3,
+        bridge_frames: int = 30,
+        tol_mm: float = 5.0,
+        rms_mm: float = 3.0,
+        margin_mm: float = 1.0,
+        max_blobs: int = 400,
+        check_frames: int = 150,
+    ) -> None:
+        if not isinstance(rig, Rig):
+            raise ReconstructionError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
+        if min(gate_px, ray_px, epipolar_px, tol_mm, rms_mm) <= 0 or max_blobs < 1:
+            raise ReconstructionError("gates, tolerances and max_blobs must be positive")
+        self.geom = RigGeometry(rig)
+        self.model = model
+        self.floor_mm = floor_mm
+        self.gate_px, self.ray_px, self.epipolar_px = gate_px, ray_px, epipolar_px
+        self.min_cameras, self.bridge_frames = min_cameras, bridge_frames
+        self.tol_mm, self.rms_mm, self.margin_mm = tol_mm, rms_mm, margin_mm
+        self.max_blobs, self.check_frames = max_blobs, check_frames
+        self.tracks = Tracks()
+        C, S = len(rig), len(model.segments)
+        self._anchors = np.full((S, 3), np.nan)
+        self._segment_of = model.segment_of
+        self._offered = np.zeros(C)
+        self._confirmed = np.zeros(C)
+        self._frames = 0
+
+    def __call__(
+        self, frame: BlobFrame, unusable: NDArray[np.bool_] | None = None
+    ) -> IdentifiedFrame:
+        """Identify one frame.
+
+        Parameters
+        ----------
+        frame : BlobFrame
+            Blobs of this frame, camera indices in rig order.
+        unusable : ndarray of bool, shape (C,), optional
+            Cameras to leave out (offline, overflowing), as their hub flags them.
+
+        Returns
+        -------
+        IdentifiedFrame
+
+        Raises
+        ------
+        ReconstructionError
+            For blobs of a camera the rig lacks.
+        CalibrationError
+            When, over the check window, some camera's blobs are hardly ever confirmed
+            by the others: the calibration does not match the cameras.
+        """
+        C = len(self.geom)
+        counts = frame.counts(C)
+        flags: IntArray = np.where(counts > self.max_blobs, FLOODED, 0).astype(np.intp)
+        flags |= np.where(counts == 0, NO_BLOBS, 0)
+        if unusable is not None:
+            flags |= np.where(np.asarray(unusable, dtype=bool).reshape(C), UNUSABLE, 0)
+        keep = (flags & (FLOODED | UNUSABLE))[frame.camera] == 0
+        camera = frame.camera[keep]
+        xy, ok = self.geom.normalize(frame.uv[keep], camera)
+        usable = ok & ~frame.merged[keep]
+        tracks = self.tracks
+        gate = np.asarray(self.gate_px * (1.0 + tracks.missed), dtype=np.float64)
+        index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable)
+        seen = index >= 0
+        rays = np.where(seen[..., None], xy[np.maximum(index, 0)], 0.0)
+        X, ray, kept = self.geom.triangulate(rays, seen, max_ray_px=self.ray_px)
+        used = np.zeros(camera.size, dtype=bool)
+        used[index[kept]] = True
+        tracks.update(X, _rms(ray), kept.sum(axis=0))
+        self._new_tracks(xy, camera, usable & ~used & ~near, used)
+        self._check_calibration(camera, usable, used)
+        tracks.keep(tracks.missed <= self.bridge_frames)
+        self._label()
+        return self._result(flags)
+
+    def _new_tracks(
+        self, xy: FloatArray, camera: IntArray, free: NDArray[np.bool_], used: NDArray[np.bool_]
+    ) -> None:
+        """New tracks from blobs nothing explains; marks their blobs used."""
+        idx = np.flatnonzero(free)
+        if idx.size < self.min_cameras:
+            return
+        found = match_blobs(
+            self.geom,
+            xy[idx],
+            camera[idx],
+            gate_px=self.epipolar_px,
+            min_cameras=self.min_cameras,
+            max_ray_px=self.ray_px,
+        )
+        if found.points.shape[0] == 0:
+            return
+        blobs = found.blobs[found.blobs >= 0]
+        used[idx[blobs]] = True
+        ghost = (
+            found.points[:, 2] < self.floor_mm
+            if self.floor_mm is not None
+            else np.zeros(found.points.shape[0], dtype=bool)
+        )
+        self.tracks.add(found.points, ghost, _rms(found.ray_px), found.n_cameras)
+
+    def _label(self) -> None:
+        tracks = self.tracks
+        M = len(self.model.labels)
+        seen = tracks.missed == 0
+        labelled = np.flatnonzero((tracks.label >= 0) & seen)
+        points = np.full((M, 3), np.nan)
+        points[tracks.label[labelled]] = tracks.position[labelled]
+        age = np.zeros(M, dtype=np.intp)
+        age[tracks.label[labelled]] = tracks.age[labelled]
+        drop = inconsistent_labels(self.model, points, age, self.tol_mm)
+        if drop.any():
+            bad = np.isin(tracks.label, np.flatnonzero(drop)) & seen
+            tracks.label[bad] = -1
+            tracks.age[bad] = 0
+        candidates = seen & (tracks.label < 0) & ~tracks.ghost
+        if candidates.any():
+            current = seen & ~tracks.ghost
+            rows = np.flatnonzero(current)
+            labels = assign_labels(
+                self.model,
+                tracks.position[rows],
+                tracks.label[rows].copy(),
+                tol_mm=self.tol_mm,
+                rms_mm=self.rms_mm,
+                margin_mm=self.margin_mm,
+                anchors=self._anchors,
+            )
+            new = rows[(labels >= 0) & (tracks.label[rows] < 0)]
+            if new.size:
+                taken = labels[np.searchsorted(rows, new)]
+                # A label taken by a new point ends the old (missed) track of that label.
+                stale = np.isin(tracks.label, taken) & ~np.isin(np.arange(len(tracks)), new)
+                tracks.label[new] = taken
+                tracks.age[new] = 0
+                tracks.label[stale] = -1
+        self._update_anchors()
+
+    def _update_anchors(self) -> None:
+        tracks = self.tracks
+        lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
+        seg = self._segment_of[tracks.label[lab]]
+        S = self._anchors.shape[0]
+        n = np.bincount(seg, minlength=S)
+        for axis in range(3):
+            total = np.bincount(seg, weights=tracks.position[lab, axis], minlength=S)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                self._anchors[:, axis] = np.where(n > 0, total / n, self._anchors[:, axis])
+
+    def _check_calibration(
+        self, camera: IntArray, usable: NDArray[np.bool_], used: NDArray[np.bool_]
+    ) -> None:
+        if self.check_frames <= 0:
+            return
+        C = len(self.geom)
+        self._offered += np.bincount(camera[usable], minlength=C)
+        self._confirmed += np.bincount(camera[usable & used], minlength=C)
+        self._frames += 1
+        if self._frames < self.check_frames:
+            return
+        offered, confirmed = self._offered, self._confirmed
+        self._offered, self._confirmed, self._frames = np.zeros(C), np.zeros(C), 0
+        busy = offered >= 5 * self.check_frames  # cameras that saw markers
+        with np.errstate(invalid="ignore", divide="ignore"):
+            share = confirmed / offered
+        bad = busy & (share < 0.2)
+        if bad.any():
+            names = [self.geom.rig[int(c)].name or f"camera {c}" for c in np.flatnonzero(bad)]
+            raise CalibrationError(
+                "the calibration does not match the cameras: "
+                + ", ".join(
+                    f"{n} ({100 * share[c]:.0f} % of blobs confirmed)"
+                    for n, c in zip(names, np.flatnonzero(bad), strict=True)
+                )
+                + f" over {self.check_frames} frames (cameras swapped, moved, or another rig?)"
+            )
+
+    def _result(self, flags: IntArray) -> IdentifiedFrame:
+        tracks = self.tracks
+        M = len(self.model.labels)
+        points = np.full((M, 3), np.nan)
+        residual = np.full(M, np.nan)
+        n_cam = np.zeros(M, dtype=np.intp)
+        seen = tracks.missed == 0
+        lab = np.flatnonzero((tracks.label >= 0) & seen)
+        points[tracks.label[lab]] = tracks.position[lab]
+        residual[tracks.label[lab]] = tracks.residual[lab]
+        n_cam[tracks.label[lab]] = tracks.views[lab]
+        return IdentifiedFrame(
+            points=points,
+            residual_px=residual,
+            n_cameras=n_cam,
+            unlabelled=int((seen & (tracks.label < 0) & ~tracks.ghost).sum()),
+            ghosts=int((seen & tracks.ghost).sum()),
+            camera_flags=flags.astype(np.intp),
+        )
+
+
+def _rms(ray_px: FloatArray) -> FloatArray:
+    """RMS over the cameras (axis 0) of ray errors (C, K), NaN where none."""
+    n = np.isfinite(ray_px).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray(np.sqrt(np.nansum(ray_px**2, axis=0) / n))

@@ -1,0 +1,223 @@
+"""Labels from the marker model: cluster checks and identities by the smallest RMS fit.
+
+Two jobs, both on the 3-D points of one frame:
+
+* :func:`inconsistent_labels` checks labelled points against their segments: a marker
+  whose distances to the other markers of its segment disagree with the model is
+  unlabelled again, so a track that jumped to the wrong marker never keeps its label.
+* :func:`assign_labels` gives labels to unlabelled points. A segment with three or more
+  labelled points has a pose (least squares, :func:`rigid_fit`), so its missing markers
+  are predicted and matched within ``tol_mm`` (re-identification after occlusion).
+  Otherwise the candidates are enumerated with an interpretation tree (pairwise
+  distances within ``tol_mm``), and among those with the most markers the identity with
+  the smallest RMS fit is chosen (:func:`choose_identity`; Woltring & Huiskes 1990:
+  "one may use the rms fitting error to decide between candidate solutions"). A choice
+  whose runner-up is within ``margin_mm`` is ambiguous and not taken.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from spotlab.core.errors import ReconstructionError
+from spotlab.reconstruction._rigid_identity import choose_identity
+from spotlab.reconstruction.identification.model import MarkerModel, Segment
+from spotlab.reconstruction.rigid import rigid_fit
+
+__all__ = ["assign_labels", "inconsistent_labels"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+def inconsistent_labels(
+    model: MarkerModel, points: FloatArray, age: IntArray, tol_mm: float
+) -> NDArray[np.bool_]:
+    """Labelled points that do not fit their segment.
+
+    Parameters
+    ----------
+    model : MarkerModel
+    points : ndarray, shape (M, 3)
+        Labelled points of one frame (mm), NaN where missing.
+    age : ndarray of int, shape (M,)
+        Frames each label has been held; of two markers whose only distance disagrees,
+        the younger label goes.
+    tol_mm : float
+        Largest accepted error of a model distance.
+
+    Returns
+    -------
+    ndarray of bool, shape (M,)
+        True for labels to drop.
+    """
+    i, j, d = model.pairs()
+    err = np.abs(np.linalg.norm(points[i] - points[j], axis=1) - d)
+    both = np.isfinite(err)
+    bad = both & (err > tol_mm)
+    M = points.shape[0]
+    checked = np.bincount(i[both], minlength=M) + np.bincount(j[both], minlength=M)
+    wrong = np.bincount(i[bad], minlength=M) + np.bincount(j[bad], minlength=M)
+    drop = (checked >= 2) & (2 * wrong > checked)
+    lone = np.flatnonzero(bad & (checked[i] == 1) & (checked[j] == 1))
+    younger = np.where(age[i[lone]] <= age[j[lone]], i[lone], j[lone])
+    drop[younger] = True
+    return np.asarray(drop)
+
+
+def _tree(
+    seg: Segment, points: FloatArray, fixed: IntArray, free: IntArray, tol_mm: float
+) -> NDArray[np.intp]:
+    """Assignments (n, P) of points to the segment's markers that keep model distances.
+
+    ``fixed[p]`` is the point already labelled as marker ``p`` (or -1); a marker without
+    one may take any of ``free`` or stay missing (-1).
+    """
+    model = seg.coordinates
+    rows = np.zeros((1, 0), dtype=np.intp)
+    for p in range(model.shape[0]):
+        options = np.array([fixed[p]]) if fixed[p] >= 0 else np.concatenate([free, [-1]])
+        n = rows.shape[0]
+        rows = np.hstack([np.repeat(rows, options.size, 0), np.tile(options, n)[:, None]])
+        new = rows[:, p]
+        ok = np.ones(rows.shape[0], dtype=bool)
+        for q in range(p):
+            old = rows[:, q]
+            both = (old >= 0) & (new >= 0)
+            dist = np.linalg.norm(points[np.maximum(old, 0)] - points[np.maximum(new, 0)], axis=1)
+            d_model = float(np.linalg.norm(model[p] - model[q]))
+            ok &= ~both | (np.abs(dist - d_model) <= tol_mm)
+            ok &= ~both | (old != new)
+        rows = rows[ok]
+    return rows
+
+
+def _predicted(seg: Segment, points: FloatArray, fixed: IntArray) -> FloatArray | None:
+    """Positions (P, 3) of the segment's markers from its labelled points, or None."""
+    have = fixed >= 0
+    if have.sum() < 3:
+        return None
+    observed = np.full((1, len(seg.markers), 3), np.nan)
+    observed[0, have] = points[fixed[have]]
+    R, t, _ = rigid_fit(seg.coordinates, observed)
+    if not np.isfinite(R).all():
+        return None
+    return np.asarray(seg.coordinates @ R[0].T + t[0])
+
+
+def assign_labels(
+    model: MarkerModel,
+    points: FloatArray,
+    labels: IntArray,
+    *,
+    tol_mm: float,
+    rms_mm: float,
+    margin_mm: float,
+    near_mm: float = 600.0,
+    anchors: FloatArray | None = None,
+) -> IntArray:
+    """Labels for the unlabelled points of one frame.
+
+    Parameters
+    ----------
+    model : MarkerModel
+    points : ndarray, shape (K, 3)
+        Points of the frame (mm).
+    labels : ndarray of int, shape (K,)
+        Label of each point (index into ``model.labels``) or -1; labels are unique.
+    tol_mm : float
+        Distance tolerance of the interpretation tree and of predicted positions.
+    rms_mm : float
+        Largest RMS fit of an accepted identity.
+    margin_mm : float
+        Smallest RMS lead over the runner-up of an accepted identity.
+    near_mm : float
+        Only points within this distance of a segment's anchor are tried for it.
+    anchors : ndarray, shape (S, 3), optional
+        Last known centre of each segment (NaN where unknown: every point is tried).
+
+    Returns
+    -------
+    ndarray of int, shape (K,)
+        ``labels`` with new labels filled in.
+
+    Raises
+    ------
+    ReconstructionError
+        For arrays of mismatched shapes.
+    """
+    K = points.shape[0]
+    if labels.shape != (K,):
+        raise ReconstructionError(f"labels must have shape ({K},)")
+    out = labels.copy()
+    point_of = np.full(len(model.labels), -1, dtype=np.intp)
+    point_of[out[out >= 0]] = np.flatnonzero(out >= 0)
+    pending = list(range(len(model.segments)))
+    while pending:
+        best: tuple[float, int, IntArray] | None = None
+        for s in pending:
+            found = _segment_labels(
+                model, s, points, out, point_of, tol_mm, margin_mm, near_mm, anchors
+            )
+            if found is None:
+                continue
+            rms, rows = found
+            if rms <= rms_mm and (best is None or rms < best[0]):
+                best = (rms, s, rows)
+        if best is None:
+            break
+        _, s, rows = best
+        seg = model.segments[s]
+        for p, k in enumerate(rows):
+            if k >= 0 and out[k] < 0:
+                out[k] = seg.markers[p]
+                point_of[seg.markers[p]] = k
+        pending.remove(s)
+    return out
+
+
+def _segment_labels(
+    model: MarkerModel,
+    s: int,
+    points: FloatArray,
+    labels: IntArray,
+    point_of: IntArray,
+    tol_mm: float,
+    margin_mm: float,
+    near_mm: float,
+    anchors: FloatArray | None,
+) -> tuple[float, IntArray] | None:
+    """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None."""
+    seg = model.segments[s]
+    fixed = point_of[list(seg.markers)]
+    if (fixed >= 0).all():
+        return None
+    free = np.flatnonzero(labels < 0)
+    if anchors is not None and np.isfinite(anchors[s]).all():
+        free = free[np.linalg.norm(points[free] - anchors[s], axis=1) < near_mm]
+    if free.size == 0:
+        return None
+    predicted = _predicted(seg, points, fixed)
+    if predicted is not None:
+        missing = np.flatnonzero(fixed < 0)
+        cost = np.linalg.norm(predicted[missing, None] - points[free][None], axis=2)
+        r, c = linear_sum_assignment(np.where(cost < tol_mm, cost, 1e6))
+        keep = cost[r, c] < tol_mm
+        if not keep.any():
+            return None
+        rows = fixed.copy()
+        rows[missing[r[keep]]] = free[c[keep]]
+        return float(np.sqrt(np.mean(cost[r[keep], c[keep]] ** 2))), rows
+    table = _tree(seg, points, fixed, free, tol_mm)
+    count = (table >= 0).sum(axis=1)
+    table = table[(count >= 3) & ((table >= 0) & (fixed < 0)).any(axis=1)]
+    if table.shape[0] == 0:
+        return None
+    table = table[(table >= 0).sum(axis=1) == (table >= 0).sum(axis=1).max()]
+    choice = choose_identity(seg.coordinates, points, candidates=table.tolist())
+    # Woltring's caveat: the smallest RMS is a criterion, not a proof; ambiguous ones wait.
+    if choice.margin < margin_mm:
+        return None
+    return choice.rms, np.array(choice.assignment, dtype=np.intp)

@@ -1,0 +1,168 @@
+"""Tracks of 3-D points in time: prediction, association of blobs, update.
+
+Each track predicts its next position at constant velocity; the prediction is projected
+into every camera and the blobs are assigned to the projections camera by camera, within
+a pixel gate, by the Hungarian algorithm (:func:`scipy.optimize.linear_sum_assignment`)
+where several compete. The gate grows with the frames a track has been missed, so a
+short occlusion is bridged; a track missed longer than the caller's limit is deleted.
+Tracking in the images with a 3-D prediction costs a few array operations per frame,
+where epipolar matching of all blobs (:mod:`.correspondence`) costs a search.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from spotlab.reconstruction.identification.geometry import RigGeometry
+
+__all__ = ["Tracks", "associate"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass
+class Tracks:
+    """The tracked points (K of them), as parallel arrays.
+
+    Attributes
+    ----------
+    position : ndarray, shape (K, 3)
+        Last measured position (mm).
+    velocity : ndarray, shape (K, 3)
+        mm per frame.
+    missed : ndarray of int, shape (K,)
+        Frames since the last measurement.
+    label : ndarray of int, shape (K,)
+        Marker index in the model, -1 unlabelled.
+    ghost : ndarray of bool, shape (K,)
+        A reflection (below the floor): tracked so its blobs are explained, never labelled.
+    age : ndarray of int, shape (K,)
+        Frames the track has held its label (or existed, unlabelled).
+    residual : ndarray, shape (K,)
+        RMS ray error of the last measurement (undistorted px).
+    views : ndarray of int, shape (K,)
+        Cameras of the last measurement.
+    """
+
+    position: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    velocity: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    missed: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    label: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    ghost: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    age: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    residual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    views: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+
+    def __len__(self) -> int:
+        return int(self.label.size)
+
+    def predict(self) -> FloatArray:
+        """Constant-velocity predictions (K, 3) for the coming frame."""
+        return self.position + self.velocity * (self.missed + 1)[:, None]
+
+    def update(self, measured: FloatArray, residual: FloatArray, views: IntArray) -> None:
+        """Take this frame's measurements (K, 3), NaN where a track was missed, with
+        their RMS ray errors (K,) and camera counts (K,)."""
+        hit = np.isfinite(measured[:, 0])
+        self.residual = residual
+        self.views = views
+        step = (measured - self.position) / (self.missed + 1)[:, None]
+        self.velocity = np.where(hit[:, None], step, self.velocity)
+        self.position = np.where(hit[:, None], measured, self.position)
+        self.missed = np.where(hit, 0, self.missed + 1)
+        self.age = self.age + 1
+
+    def add(
+        self, points: FloatArray, ghost: NDArray[np.bool_], residual: FloatArray, views: IntArray
+    ) -> None:
+        """Start unlabelled tracks at ``points`` (N, 3), at rest."""
+        n = points.shape[0]
+        self.residual = np.concatenate([self.residual, residual])
+        self.views = np.concatenate([self.views, views])
+        self.position = np.vstack([self.position, points])
+        self.velocity = np.vstack([self.velocity, np.zeros((n, 3))])
+        self.missed = np.concatenate([self.missed, np.zeros(n, dtype=np.intp)])
+        self.label = np.concatenate([self.label, np.full(n, -1, dtype=np.intp)])
+        self.ghost = np.concatenate([self.ghost, ghost])
+        self.age = np.concatenate([self.age, np.zeros(n, dtype=np.intp)])
+
+    def keep(self, mask: NDArray[np.bool_]) -> None:
+        """Delete the tracks where ``mask`` is False."""
+        for name in (
+            "position",
+            "velocity",
+            "missed",
+            "label",
+            "ghost",
+            "age",
+            "residual",
+            "views",
+        ):
+            setattr(self, name, getattr(self, name)[mask])
+
+
+def associate(
+    geom: RigGeometry,
+    predicted: FloatArray,
+    gate_px: FloatArray,
+    xy: FloatArray,
+    camera: IntArray,
+    usable: NDArray[np.bool_],
+) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Blobs for predicted points, camera by camera.
+
+    Parameters
+    ----------
+    geom : RigGeometry
+    predicted : ndarray, shape (K, 3)
+        Predicted points (mm).
+    gate_px : ndarray, shape (K,)
+        Largest distance (undistorted px) between a projection and its blob.
+    xy : ndarray, shape (N, 2)
+        Normalised blob coordinates.
+    camera : ndarray of int, shape (N,)
+    usable : ndarray of bool, shape (N,)
+        Blobs that may be assigned (not merged, undistorted).
+
+    Returns
+    -------
+    index : ndarray of int, shape (C, K)
+        The blob assigned to track ``k`` in camera ``c``, -1 for none.
+    near : ndarray of bool, shape (N,)
+        Blobs within the gate of some projection (assigned or not): explained.
+    """
+    C, K = len(geom), predicted.shape[0]
+    index = np.full((C, K), -1, dtype=np.intp)
+    near = np.zeros(camera.size, dtype=bool)
+    if K == 0 or camera.size == 0:
+        return index, near
+    proj = geom.project(predicted)  # (C, K, 2)
+    order = np.argsort(camera, kind="stable")
+    bounds = np.searchsorted(camera[order], np.arange(C + 1))
+    for c in range(C):
+        blobs = order[bounds[c] : bounds[c + 1]]
+        if blobs.size == 0:
+            continue
+        diff = proj[c][:, None, :] - xy[blobs][None]
+        d = np.hypot(diff[..., 0], diff[..., 1]) * geom.f[c]  # (K, B)
+        inside = d < gate_px[:, None]  # NaN (behind the camera) is never inside
+        near[blobs[inside.any(axis=0)]] = True
+        inside &= usable[blobs][None]
+        rows = np.flatnonzero(inside.any(axis=1))
+        if rows.size == 0:
+            continue
+        cols = np.flatnonzero(inside.any(axis=0))
+        sub = inside[np.ix_(rows, cols)]
+        if (sub.sum(axis=1) == 1).all() and (sub.sum(axis=0) == 1).all():
+            index[c, rows] = blobs[cols[np.argmax(sub, axis=1)]]
+            continue
+        cost = np.where(sub, d[np.ix_(rows, cols)], 1e6)
+        r, k = linear_sum_assignment(cost)
+        ok = sub[r, k]
+        index[c, rows[r[ok]]] = blobs[cols[k[ok]]]
+    return index, near
