@@ -94,6 +94,9 @@ class Identifier:
         Cameras a new point needs (a tracked one needs 2).
     bridge_frames : int
         Frames a track is carried through without measurement before it is deleted.
+    keep_label_frames : int
+        A track found again after at most this many missed frames keeps its label;
+        after a longer gap the label is given again by the cluster fit.
     tol_mm, rms_mm, margin_mm : float
         Cluster checks: tolerance of model distances, largest RMS of an accepted
         identity, smallest lead over the runner-up (see :func:`.assign_labels`).
@@ -119,6 +122,7 @@ class Identifier:
         epipolar_px: float = 1.5,
         min_cameras: int = 3,
         bridge_frames: int = 30,
+        keep_label_frames: int = 3,
         tol_mm: float = 5.0,
         rms_mm: float = 3.0,
         margin_mm: float = 1.0,
@@ -134,6 +138,7 @@ class Identifier:
         self.floor_mm = floor_mm
         self.gate_px, self.ray_px, self.epipolar_px = gate_px, ray_px, epipolar_px
         self.min_cameras, self.bridge_frames = min_cameras, bridge_frames
+        self.keep_label_frames = keep_label_frames
         self.tol_mm, self.rms_mm, self.margin_mm = tol_mm, rms_mm, margin_mm
         self.max_blobs, self.check_frames = max_blobs, check_frames
         self.tracks = Tracks()
@@ -186,7 +191,13 @@ class Identifier:
         X, ray, kept = self.geom.triangulate(rays, seen, max_ray_px=self.ray_px)
         used = np.zeros(camera.size, dtype=bool)
         used[index[kept]] = True
+        long_gap = tracks.missed >= self.keep_label_frames
         tracks.update(X, _rms(ray), kept.sum(axis=0))
+        # After more than a short gap a track may have caught another marker's blobs:
+        # its label must be earned again from its cluster.
+        back = long_gap & (tracks.missed == 0) & (tracks.label >= 0)
+        tracks.label[back] = -1
+        tracks.age[back] = 0
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
         self._check_calibration(camera, usable, used)
         tracks.keep(tracks.missed <= self.bridge_frames)

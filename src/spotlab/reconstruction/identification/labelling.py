@@ -43,8 +43,8 @@ def inconsistent_labels(
     points : ndarray, shape (M, 3)
         Labelled points of one frame (mm), NaN where missing.
     age : ndarray of int, shape (M,)
-        Frames each label has been held; of two markers whose only distance disagrees,
-        the younger label goes.
+        Frames each label has been held (kept for callers that rank labels; two markers
+        whose only distance disagrees both lose their labels).
     tol_mm : float
         Largest accepted error of a model distance.
 
@@ -61,9 +61,9 @@ def inconsistent_labels(
     checked = np.bincount(i[both], minlength=M) + np.bincount(j[both], minlength=M)
     wrong = np.bincount(i[bad], minlength=M) + np.bincount(j[bad], minlength=M)
     drop = (checked >= 2) & (2 * wrong > checked)
-    lone = np.flatnonzero(bad & (checked[i] == 1) & (checked[j] == 1))
-    younger = np.where(age[i[lone]] <= age[j[lone]], i[lone], j[lone])
-    drop[younger] = True
+    lone = np.flatnonzero(bad & ((checked[i] == 1) | (checked[j] == 1)))
+    drop[i[lone]] = True  # one distance cannot say which of the two is wrong
+    drop[j[lone]] = True
     return np.asarray(drop)
 
 
