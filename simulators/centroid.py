@@ -1,0 +1,399 @@
+"""Byte-level emulator of the CEN video-centroid hub (docs/protocols/centroid.md).
+
+:class:`CentroidDevice` is an MCS-1 device like :class:`SelspotDevice` — it
+reuses its event loop, line pacing, link faults, FIFO, fault log and lab
+publishing — with the CEN command table and :class:`CentroidStream` in place of
+the SPX stream. Each frame the hub triggers its cameras; camera ``c`` exposes
+after its own trigger delay, stamps the exposure mid-point with its own clock
+(a :class:`DeviceClock` with its own offset and drift) and renders the scene's
+markers as blobs (:mod:`spotlab.simulators.blobs`) at that instant.
+
+Scene effects on top of the link faults: ghost reflections and noise blobs
+(:class:`BlobModel`), sunlight on a camera (thousands of blobs: the camera
+overflows) and a camera going offline for a while, both timed in seconds after
+``START:``. The truth (:class:`CentroidTruth`) is written as npz on close.
+
+Nothing here imports the driver: the device side is written from the spec.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from spotlab.geometry import Rig
+from spotlab.simulators import centroid_wire as cw
+from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_camera
+from spotlab.simulators.centroid_body import GaitBody, carried_by, segment_capsules
+from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
+from spotlab.simulators.clock import DeviceClock
+from spotlab.simulators.commands import Command, CommandError
+from spotlab.simulators.faults import FaultEntry, FaultInjector
+from spotlab.simulators.lab import LabPublisher, frame_start
+from spotlab.simulators.motions import Motion, reference_markers
+from spotlab.simulators.psd import PsdReading
+from spotlab.simulators.scene import Scene, ring_rig
+from spotlab.simulators.selspot import SelspotDevice
+from spotlab.simulators.spx_stream import SpxStream, TakenFrame
+from spotlab.simulators.truth import TruthRow
+
+F64 = npt.NDArray[np.float64]
+FIRMWARE = "1.0"
+#: Time after the exposure's end until the frame is queued (readout, centroiding).
+PROCESSING_S = 300e-6
+#: Sunlight blobs per frame on a sunlit camera.
+SUN_BLOBS = 3000
+FIFO_BYTES = 1 << 18
+_EMPTY = np.zeros((0, 0), dtype=np.uint16)
+_NO_READING = PsdReading(
+    x=_EMPTY, y=_EMPTY, intensity=_EMPTY.astype(np.uint8), flags=_EMPTY.astype(np.uint8),
+    power=_EMPTY.astype(np.float64),
+)  # fmt: skip
+
+
+@dataclass
+class CenConfig:
+    """Hub configuration (the spec's defaults after reset or ``INIT:``)."""
+
+    rate_mhz: int = 100_000
+    camera_mask: int = 0xFF
+    exposure_us: int = 500
+    threshold: int = 128
+    max_blobs: int = 256
+
+    def cameras(self) -> list[int]:
+        """Enabled cameras, increasing."""
+        return [c for c in range(cw.MAX_CAMERAS) if self.camera_mask >> c & 1]
+
+
+@dataclass(frozen=True)
+class Episode:
+    """A scene event on one camera from ``at_s`` for ``duration_s`` seconds after ``START:``."""
+
+    camera: int
+    at_s: float
+    duration_s: float
+
+    def active(self, camera: int, t_s: float) -> bool:
+        """Whether it applies to ``camera`` at ``t_s`` seconds after ``START:``."""
+        return camera == self.camera and self.at_s <= t_s < self.at_s + self.duration_s
+
+
+class CentroidStream(SpxStream):
+    """Hub frames of one ``START:`` .. ``STOP:`` period (see the module docstring)."""
+
+    def __init__(self, device: CentroidDevice, config: CenConfig, start_ns: int, index: int):
+        self.device = device
+        self.cconfig = config
+        self.clock = device.clock
+        self.index = index
+        self.period_s = 1000.0 / config.rate_mhz
+        self.start_ns = start_ns
+        self.start_osc = self.clock.osc_s(start_ns)
+        self.frame_no = 0
+        self.seq = 0
+        self.cams = config.cameras()
+        self._outbox: dict[int, bytes] = {}
+        self._last_bytes = cw.cen_frame_length(len(self.cams), 0)
+        self._steps_seen = self.clock.step_count(self.start_osc)
+        self.ready_ns, self._tick, self._osc0 = self._timing(0)
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes of the frame taken last (frames vary in length)."""
+        return self._last_bytes
+
+    def _timing(self, k: int) -> tuple[int, int, float]:
+        tick, osc0 = frame_start(self.clock, self.start_osc, self.period_s, k)
+        done = osc0 + self.device.max_delay_s + self.cconfig.exposure_us * 1e-6 + PROCESSING_S
+        return self.clock.world_ns_at(done), tick, osc0
+
+    def take(self) -> TakenFrame:
+        """Expose every enabled camera, render the blobs, write the truth, schedule the next."""
+        dev, cfg = self.device, self.cconfig
+        w_trig = float(self.clock.world_ns(self._osc0))
+        since_start = (w_trig - self.start_ns) * 1e-9
+        half = cfg.exposure_us * 0.5e-6
+        w_exp = w_trig + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (n,)
+        scene_s = (w_exp - self.clock.epoch_ns) * 1e-9
+        online = [not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams]
+        X_all = dev.positions(scene_s)  # (n, M_all, 3)
+        records = []
+        truth_cams: list[CameraTruth] = []
+        for j, c in enumerate(self.cams):
+            if not online[j]:
+                records.append(cw.CameraRecord(c, cw.CAM_OFFLINE, 0, self.frame_no, 0, _NO_BLOBS))
+                truth_cams.append(None)
+                continue
+            sun = SUN_BLOBS if any(e.active(c, since_start) for e in dev.sunlight) else 0
+            blobs = dev.render(c, X_all[j], sun)
+            n_found = blobs.uv.shape[0]
+            keep = min(n_found, cfg.max_blobs)
+            tick = round(dev.camera_clocks[c].device_us(round(w_exp[j])))
+            records.append(
+                cw.CameraRecord(
+                    c, cw.CAM_OVERFLOW if n_found > keep else 0, n_found, self.frame_no, tick,
+                    cw.quantise_blobs(
+                        blobs.uv[:keep], blobs.area[:keep], blobs.peak[:keep], blobs.flags[:keep]
+                    ),
+                )
+            )  # fmt: skip
+            truth_cams.append((blobs, keep, tick, float(scene_s[j])))
+        payload = cw.cen_payload(
+            self.frame_no, self._tick, 0, cfg.camera_mask, cfg.max_blobs, cfg.exposure_us,
+            cfg.threshold, records,
+        )  # fmt: skip
+        self._outbox[self.frame_no] = payload
+        self._last_bytes = len(payload) + cw.FRAME_OVERHEAD
+        t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
+        row = TruthRow(
+            stream=self.index, frame_no=self.frame_no, world_ns=w_trig, device_us=self._tick,
+            led_ids=np.zeros(0, dtype=np.int64), positions=np.zeros((0, 3)),
+        )  # fmt: skip
+        if dev.truth is not None:
+            dev.truth.add(row, t_mid, dev.positions(np.array([t_mid]))[0], self.cams, truth_cams)
+        steps = self.clock.step_count(self._osc0)
+        taken = TakenFrame(
+            frame_no=self.frame_no, device_us=self._tick, reading=_NO_READING,
+            ambient_high=False, resynced=steps != self._steps_seen, truth=row,
+        )  # fmt: skip
+        self._steps_seen = steps
+        self.frame_no += 1
+        self.ready_ns, self._tick, self._osc0 = self._timing(self.frame_no)
+        return taken
+
+    def encode(self, taken: TakenFrame, status: int, flags: int) -> bytes:
+        """The whole data frame of ``taken`` with this stream's next seq (then seq += 1)."""
+        payload = bytearray(self._outbox.pop(taken.frame_no))
+        payload[8:10] = (status & 0xFFFF).to_bytes(2, "little")
+        data = cw.cen_frame(self.seq, bytes(payload), flags)
+        self.seq = (self.seq + 1) & 0xFFFF
+        return data
+
+
+_NO_BLOBS = cw.quantise_blobs(np.zeros((0, 2)), [], [], [])
+
+
+class CentroidDevice(SelspotDevice):
+    """A CEN hub with its cameras, as seen from its serial port.
+
+    Parameters
+    ----------
+    rig : Rig, optional
+        The cameras (default: :func:`ring_rig` of 8, 1280 x 1024).
+    markers : int
+        Markers: the first of the 40 of :class:`GaitBody`, then static reference
+        markers beyond 40.
+    model : BlobModel, optional
+        Marker size, noise, ghosts.
+    clock : DeviceClock, optional
+        The hub's clock.
+    camera_clocks : sequence of DeviceClock, optional
+        One per camera (default: seeded offsets of 0-100 s and drifts of +-20 ppm
+        on top of the hub's).
+    faults : FaultInjector, optional
+        Link faults.
+    sunlight, camera_off : sequence of Episode
+        Sunlit cameras and cameras offline, in seconds after ``START:``.
+    occlusion : bool
+        Body segments hide markers.
+    serial, seed, fault_log, default_rate_hz, now_ns, lab :
+        As :class:`SelspotDevice`.
+    truth : path, optional
+        Truth npz to write on close (:class:`CentroidTruth`).
+    """
+
+    def __init__(
+        self,
+        rig: Rig | None = None,
+        markers: int = 40,
+        model: BlobModel | None = None,
+        clock: DeviceClock | None = None,
+        camera_clocks: Sequence[DeviceClock] | None = None,
+        faults: FaultInjector | None = None,
+        *,
+        sunlight: Sequence[Episode] = (),
+        camera_off: Sequence[Episode] = (),
+        occlusion: bool = True,
+        serial: str = "SIM00091",
+        seed: int = 0,
+        truth: str | Path | None = None,
+        fault_log: str | Path | None = None,
+        default_rate_hz: float = 100.0,
+        now_ns: int | None = None,
+        lab: LabPublisher | None = None,
+    ) -> None:
+        self.rig = rig if rig is not None else ring_rig(8)
+        n_cams = len(self.rig.cameras)
+        if not 1 <= n_cams <= cw.MAX_CAMERAS:
+            raise ValueError(f"a CEN hub has 1-{cw.MAX_CAMERAS} cameras, got {n_cams}")
+        if markers < 1:
+            raise ValueError(f"markers must be >= 1, got {markers}")
+        self.model = model if model is not None else BlobModel()
+        self.body = GaitBody()
+        self.n_markers = markers
+        self.labels = (self.body.labels + reference_markers(max(markers - 40, 0), seed).labels)[
+            :markers
+        ]
+        self._static: Motion = reference_markers(max(markers - 40, 1), seed)
+        self.sunlight = tuple(sunlight)
+        self.camera_off = tuple(camera_off)
+        self.occlusion = occlusion
+        rng = np.random.default_rng(np.random.SeedSequence([seed, 0xCE17]))
+        self.trigger_delay_s = rng.uniform(0.0, 20e-6, n_cams)
+        self.max_delay_s = float(self.trigger_delay_s.max())
+        self.ghost_pairs = rng.random((n_cams, markers)) < self.model.ghost_rate
+        self._blob_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xB10B]))
+        self._on_capsule = carried_by(40)
+        placeholder = Scene(motion=reference_markers(1, seed), cameras=ring_rig(1))
+        super().__init__(
+            placeholder, clock, faults, serial=serial, seed=seed, fault_log=fault_log,
+            default_rate_hz=default_rate_hz, fifo_bytes=FIFO_BYTES, now_ns=now_ns, lab=lab,
+        )  # fmt: skip
+        if camera_clocks is None:
+            hub = self.clock
+            camera_clocks = [
+                DeviceClock(
+                    offset_s=hub.offset_s + float(rng.uniform(0, 100)),
+                    drift_ppm=hub.drift_ppm + float(rng.uniform(-20, 20)),
+                    seed=seed + 1 + c, epoch_ns=hub.epoch_ns,
+                )
+                for c in range(n_cams)
+            ]  # fmt: skip
+        if len(camera_clocks) != n_cams:
+            raise ValueError(f"{len(camera_clocks)} camera clocks for {n_cams} cameras")
+        self.camera_clocks = list(camera_clocks)
+        self.truth = CentroidTruth(truth, self) if truth is not None else None
+        self._cconfig = CenConfig(rate_mhz=self._default_rate_mhz, camera_mask=(1 << n_cams) - 1)
+
+    # -- the scene -----------------------------------------------------------------
+    def positions(self, scene_s: F64) -> F64:
+        """All emitted markers at times (K,) s -> (K, M, 3) mm."""
+        t = np.asarray(scene_s, dtype=np.float64)
+        X = self.body.all_markers(t)
+        if self.n_markers <= 40:
+            return X[:, : self.n_markers]
+        extra = self._static.positions(0.0)[: self.n_markers - 40]
+        return np.concatenate([X, np.broadcast_to(extra, (t.size, *extra.shape))], axis=1)
+
+    def render(self, camera: int, X: F64, sun_blobs: int = 0) -> CameraBlobs:
+        """One camera's blobs for markers ``X`` (M, 3) (see :func:`render_camera`)."""
+        body = X[:40] if X.shape[0] >= 40 else self.body.all_markers(np.zeros(1))[0]
+        caps = segment_capsules(body) if self.occlusion and X.shape[0] >= 40 else None
+        on = np.zeros((X.shape[0], 9), dtype=bool)
+        on[: min(40, X.shape[0])] = self._on_capsule[: min(40, X.shape[0])]
+        return render_camera(
+            self.rig.cameras[camera], X, self.model, self._blob_rng, capsules=caps,
+            on_capsule=on, ghosts=self.ghost_pairs[camera], sun_blobs=sun_blobs,
+        )  # fmt: skip
+
+    # -- life cycle ----------------------------------------------------------------
+    def _power_on(self, t: int, fault: FaultEntry | None) -> None:
+        super()._power_on(t, fault)
+        if hasattr(self, "rig"):
+            self._cconfig = CenConfig(
+                rate_mhz=self._default_rate_mhz, camera_mask=(1 << len(self.rig.cameras)) - 1
+            )
+
+    def close(self, now_ns: int | None = None, catch_up: bool = True) -> None:
+        """As :meth:`SelspotDevice.close`, and the truth npz is written."""
+        super().close(now_ns, catch_up)
+        if self.truth is not None:
+            self.truth.write()
+
+    def flush(self, now_ns: int | None = None) -> None:
+        """As :meth:`SelspotDevice.flush`, and the truth npz is written (the port closed)."""
+        super().flush(now_ns)
+        if self.truth is not None:
+            self.truth.write()
+
+    # -- commands ------------------------------------------------------------------
+    def handlers(self) -> dict[str, Callable[[Command, int], str | None]]:
+        """Verb -> handler (the MCS-1 common verbs and the CEN ones)."""
+        common = super().handlers()
+        return {
+            **{v: common[v] for v in ("RESET", "STAT", "TIME")},
+            "COMM": self._cen_comm, "INIT": self._cen_init, "VER": self._cen_ver,
+            "RATE": self._cen_rate, "START": self._cen_start, "STOP": self._cen_stop,
+            "CAMS": self._cen_cams, "EXPO": self._cen_expo, "THRS": self._cen_thrs,
+            "BLOB": self._cen_blob,
+        }  # fmt: skip
+
+    def _cen_comm(self, cmd: Command, t: int) -> None:
+        self._not_streaming()
+        code = self._int_param(cmd, 0, max(cw.CEN_BAUD_RATES))
+        chunk = self._reply("OKAY", t)
+        self._baud_switch = (chunk.end_ns, cw.CEN_BAUD_RATES[code])
+
+    def _cen_init(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._no_params(cmd)
+        self._cconfig = CenConfig(
+            rate_mhz=self._default_rate_mhz, camera_mask=(1 << len(self.rig.cameras)) - 1
+        )
+        return self._configured()
+
+    def _cen_ver(self, cmd: Command, t: int) -> str:
+        self._int_param(cmd, 0, 0)
+        n = len(self.rig.cameras)
+        return f"CEN {FIRMWARE} {self.serial} {n} {cw.MAX_BLOBS} {cw.CAMERA_TICK_HZ}"
+
+    def _cen_rate(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._cconfig.rate_mhz = self._int_param(cmd, 1_000, 2_000_000)
+        return self._configured()
+
+    def _cen_cams(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._cconfig.camera_mask = self._int_param(cmd, 1, (1 << len(self.rig.cameras)) - 1)
+        return self._configured()
+
+    def _cen_expo(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._cconfig.exposure_us = self._int_param(cmd, 20, 10_000)
+        return self._configured()
+
+    def _cen_thrs(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._cconfig.threshold = self._int_param(cmd, 1, 254)
+        return self._configured()
+
+    def _cen_blob(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._cconfig.max_blobs = self._int_param(cmd, 1, cw.MAX_BLOBS)
+        return self._configured()
+
+    def _cen_start(self, cmd: Command, t: int) -> None:
+        self._not_streaming()
+        self._no_params(cmd)
+        cfg = self._cconfig
+        n = len(cfg.cameras())
+        if cfg.exposure_us * cfg.rate_mhz > 900_000_000:
+            raise CommandError(0x23)
+        longest = cw.cen_frame_length(n, n * cfg.max_blobs) - cw.FRAME_OVERHEAD
+        if longest > cw.MAX_PAYLOAD:
+            raise CommandError(0x80)
+        if cfg.rate_mhz * cw.cen_frame_length(n, 0) * 10 > 800 * self._baud:
+            raise CommandError(0x80)
+        self._anchor_faults(t)
+        self._reply("OKAY", t)
+        frozen = CenConfig(**cfg.__dict__)
+        stream: SpxStream = CentroidStream(self, frozen, t, self._streams)
+        self._stream = stream
+        self._streams += 1
+        self._overflow_left = 0
+
+    def _cen_stop(self, cmd: Command, t: int) -> str | None:
+        self._no_params(cmd)
+        if self._stream is None:
+            return "OKAY"
+        self._reply("OKAY", t)
+        self._stream = None
+        return None
+
+
+__all__ = ["CenConfig", "CentroidDevice", "CentroidStream", "Episode"]

@@ -1,0 +1,113 @@
+"""A 40-marker walking body for the video-centroid simulator, with body segments that occlude.
+
+:class:`GaitBody` places 40 Plug-in-Gait-like full-body markers on the walking
+model of :class:`~spotlab.simulators.motions.Gait` (its 19 markers, plus 21
+placed on the segments between them: thigh, tibia, upper arm, forearm, wrist
+bar, finger, PSIS, head, back and chest markers, offset from the segment
+axis the way wands and skin markers are). :meth:`GaitBody.segments` gives the
+body's limbs and trunk as capsules (axis end points and radius, mm) at any
+time: a camera does not see a marker when its line of sight passes through a
+capsule the marker is not on.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from spotlab.simulators.motions import GAIT_LABELS, Gait, Motion
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+EXTRA_LABELS = (
+    "LTHI", "RTHI", "LTIB", "RTIB", "LUPA", "RUPA", "LFRM", "RFRM", "LWRB", "RWRB",
+    "LFIN", "RFIN", "LPSI", "RPSI", "LFHD", "RFHD", "LBHD", "RBHD", "T10", "CLAV", "STRN",
+)  # fmt: skip
+BODY_LABELS = GAIT_LABELS + EXTRA_LABELS
+_G = {name: i for i, name in enumerate(BODY_LABELS)}
+#: Capsules: (end marker a, end marker b, radius mm); a marker on either end is on it.
+SEGMENTS = (
+    ("LASI", "LKNE", 70.0), ("RASI", "RKNE", 70.0), ("LKNE", "LANK", 50.0),
+    ("RKNE", "RANK", 50.0), ("LSHO", "LELB", 45.0), ("RSHO", "RELB", 45.0),
+    ("LELB", "LWRA", 35.0), ("RELB", "RWRA", 35.0), ("SACR", "C7", 130.0),
+)  # fmt: skip
+#: Markers carried by each capsule besides its ends (they sit on its surface).
+SEGMENT_MARKERS = {
+    0: ("LTHI",), 1: ("RTHI",), 2: ("LTIB",), 3: ("RTIB",), 4: ("LUPA",), 5: ("RUPA",),
+    6: ("LFRM", "LWRB"), 7: ("RFRM", "RWRB"),
+    8: ("LASI", "RASI", "LPSI", "RPSI", "T10", "CLAV", "STRN", "LSHO", "RSHO"),
+}  # fmt: skip
+
+
+class GaitBody(Motion):
+    """40 markers on a body walking on a circle (see the module docstring).
+
+    Parameters
+    ----------
+    speed, radius, stride_hz : float
+        As :class:`~spotlab.simulators.motions.Gait` (m/s, mm, Hz).
+    """
+
+    def __init__(self, speed: float = 1.2, radius: float = 1200.0, stride_hz: float = 0.9) -> None:
+        self._gait = Gait(speed, radius, stride_hz)
+        self.n_markers = len(BODY_LABELS)
+        self.labels = BODY_LABELS
+
+    def all_markers(self, t: F64) -> F64:
+        """All 40 markers at times (K,) -> (K, 40, 3) mm."""
+        g = self._gait._all(np.asarray(t, dtype=np.float64))
+        p = {name: g[:, i] for i, name in enumerate(GAIT_LABELS)}
+        left = p["LASI"] - p["RASI"]
+        left /= np.linalg.norm(left, axis=1, keepdims=True)
+        up = np.zeros_like(left)
+        up[:, 2] = 1.0
+        fwd = np.cross(left, up)
+
+        def mid(a: str, b: str, frac: float, lat: float, ahead: float = 0.0) -> F64:
+            return p[a] + frac * (p[b] - p[a]) + lat * left + ahead * fwd
+
+        extra = {}
+        for s, lat in (("L", 1.0), ("R", -1.0)):
+            extra[s + "THI"] = mid(s + "ASI", s + "KNE", 0.55, 40 * lat, 15)
+            extra[s + "TIB"] = mid(s + "KNE", s + "ANK", 0.5, 35 * lat, 25)
+            extra[s + "UPA"] = mid(s + "SHO", s + "ELB", 0.5, 40 * lat, -20)
+            extra[s + "FRM"] = mid(s + "ELB", s + "WRA", 0.5, 30 * lat, 25)
+            extra[s + "WRB"] = mid(s + "ELB", s + "WRA", 1.0, -35 * lat, -25)
+            extra[s + "FIN"] = mid(s + "ELB", s + "WRA", 1.35, 0.0)
+            extra[s + "PSI"] = p["SACR"] + 55 * lat * left - 20 * fwd
+            extra[s + "FHD"] = p["HEAD"] + 60 * lat * left + 40 * fwd - 40 * up
+            extra[s + "BHD"] = p["HEAD"] + 60 * lat * left - 90 * fwd - 40 * up
+        extra["T10"] = mid("SACR", "C7", 0.5, 0.0, -40)
+        extra["CLAV"] = 0.5 * (p["LSHO"] + p["RSHO"]) + 110 * fwd - 40 * up
+        extra["STRN"] = extra["CLAV"] - 170 * up + 20 * fwd
+        return np.concatenate([g, np.stack([extra[k] for k in EXTRA_LABELS], 1)], axis=1)
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        t = np.asarray(times, dtype=np.float64)
+        return np.asarray(self.all_markers(t)[np.arange(t.size), np.asarray(markers, np.int64)])
+
+
+def segment_capsules(markers: F64) -> tuple[F64, F64, F64]:
+    """The body's capsules from one frame's 40 markers (40, 3) mm.
+
+    Returns
+    -------
+    a, b : ndarray, shape (K, 3)
+        Axis end points (mm).
+    radius : ndarray, shape (K,)
+        Radii (mm).
+    """
+    ia = np.array([_G[a] for a, _, _ in SEGMENTS])
+    ib = np.array([_G[b] for _, b, _ in SEGMENTS])
+    return markers[ia], markers[ib], np.array([r for _, _, r in SEGMENTS])
+
+
+def carried_by(n_markers: int) -> npt.NDArray[np.bool_]:
+    """(M, K): marker ``m`` is on capsule ``k`` (an end or a surface marker of it)."""
+    on = np.zeros((n_markers, len(SEGMENTS)), dtype=bool)
+    for k, (a, b, _) in enumerate(SEGMENTS):
+        for name in (a, b, *SEGMENT_MARKERS.get(k, ())):
+            if _G[name] < n_markers:
+                on[_G[name], k] = True
+    return on
