@@ -362,7 +362,11 @@ def timer_url_for(options: TimerSimOptions) -> str:
 
 
 def device_from_url(url: str, now_ns: int | None = None) -> SelspotDevice:
-    """The simulated device a ``sim://selspot?...`` or ``sim://timer?...`` URL describes."""
+    """The simulated device a ``sim://selspot|timer|centroid?...`` URL describes."""
+    if urlsplit(url).netloc == "centroid":
+        from spotlab.simulators import centroid_service as cen
+
+        return cen.build_centroid_device(cen.centroid_options_from_url(url), now_ns=now_ns)
     if urlsplit(url).netloc == "timer":
         return build_timer_device(_options_from_url(url, "timer", TimerSimOptions), now_ns=now_ns)
     return build_device(options_from_url(url), now_ns=now_ns)
