@@ -194,10 +194,17 @@ class Identifier:
         long_gap = tracks.missed >= self.keep_label_frames
         tracks.update(X, _rms(ray), kept.sum(axis=0))
         # After more than a short gap a track may have caught another marker's blobs:
-        # its label must be earned again from its cluster.
-        back = long_gap & (tracks.missed == 0) & (tracks.label >= 0)
-        tracks.label[back] = -1
-        tracks.age[back] = 0
+        # it keeps its label only where two labelled cluster mates can check it
+        # (inconsistent_labels), else the label is earned again from the cluster.
+        back = np.flatnonzero(long_gap & (tracks.missed == 0) & (tracks.label >= 0))
+        if back.size:
+            mates = (tracks.label >= 0) & (tracks.missed == 0) & ~long_gap
+            present = np.bincount(
+                self._segment_of[tracks.label[mates]], minlength=len(self.model.segments)
+            )
+            lone = back[present[self._segment_of[tracks.label[back]]] < 2]
+            tracks.label[lone] = -1
+            tracks.age[lone] = 0
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
         self._check_calibration(camera, usable, used)
         tracks.keep(tracks.missed <= self.bridge_frames)
