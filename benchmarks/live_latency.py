@@ -4,11 +4,12 @@ Target (TARGETS.md): p99 <= 1 ms host processing. A SELSPOT-style system cannot 
 (128 LEDs in 100 us slots take 12.8 ms: at most 78 Hz, 4 cameras), so the frames come
 from :class:`spotlab.testing.synthetic_image2d.SyntheticImage2d`: the reference rig of
 TARGETS.md (8 cameras 1280x1024 on a 4 m ring, distortion), 128 markers moving on
-known paths, 0.2 px noise, paced by the clock at 300 Hz, arrival stamped when each
-frame is due (the instant a link would deliver its last byte; the device computes the
-frame before that). Each frame goes through a real :class:`Session` into a
-:class:`LivePipeline` holding the rig loaded from TOML; latency = the instant the 3-D
-points are handed to the consumers minus the arrival stamp.
+known paths, 0.2 px noise, paced by the clock at 300 Hz, arrival stamped when the
+reader wakes for a due frame (as a link's read returns with its last byte; the frames'
+image coordinates are computed before the run). Each frame goes through a real
+:class:`Session` into a :class:`LivePipeline` holding the rig loaded from TOML;
+latency = the instant the 3-D points are handed to the consumers minus the arrival
+stamp.
 
 Configurations (``--configs``):
 
@@ -19,9 +20,11 @@ Configurations (``--configs``):
   systems), their frames matched by time, inline.
 
 Figures per configuration (one JSON line each): p50 / p99 / max / mean latency (us),
-frames over 1 ms, frames in and out, incomplete groups, and the 3-D error against the
-true paths (RMS, mm), plus the machine's load before and after (other programs share
-the cores). The first ``--warmup`` seconds are not measured.
+frames over 1 ms, frames in and out, incomplete groups, how far the readers fell
+behind the devices' schedule (``reader_behind_us``: stamp minus due instant; a real
+link's kernel buffer hides this from the latency), the 3-D error against the true
+paths (RMS, mm), and the machine's load before and after (other programs share the
+cores). The first ``--warmup`` seconds are not measured.
 
 Decoding is not in these figures (no wire bytes); the SPX decoder takes 30-49 us per
 4x32 frame (``benchmarks/decode_selspot.py``).
@@ -43,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from spotlab.acquisition.live import LiveFrame, LivePipeline
+from spotlab.acquisition.live import LatencyStats, LiveFrame, LivePipeline
 from spotlab.acquisition.session import Session
 from spotlab.geometry import Rig
 from spotlab.simulators.rigs import ring_rig
@@ -98,6 +101,8 @@ def _run(config: str, seconds: float, warmup_s: float, rig: Rig) -> dict[str, An
     # Latency of the warm-up frames is not counted: reset once they are through.
     time.sleep(warmup_s)
     pipeline.reset_latency()
+    for device in devices:
+        device.behind = LatencyStats()
     status = session.run_for(seconds)
     stats = pipeline.stats()
     lat = stats.latency
@@ -116,6 +121,8 @@ def _run(config: str, seconds: float, warmup_s: float, rig: Rig) -> dict[str, An
         "mean_us": round(lat.mean_us, 1),
         "over_1ms": lat.over_1ms,
         "incomplete": stats.incomplete,
+        "reader_behind_us_p99": max(d.behind.summary().p99_us for d in devices),
+        "reader_behind_us_max": round(max(d.behind.max_ns for d in devices) / 1e3, 1),
         "failed": stats.failed,
         "overflows": sum(status.overflows.values()),
         "rms_error_mm": round(float(np.sqrt(meter.sq / max(meter.points, 1))), 4),

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.acquisition.live.latency import LatencyStats
 from spotlab.core.errors import DeviceError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
@@ -109,6 +110,9 @@ class SyntheticImage2d:
         self.period = int(period)
         self._frames: FloatArray | None = None
         self._stop = threading.Event()
+        #: How late each frame was stamped after its due instant: the host reading
+        #: behind the device (a real link's kernel buffer would hide it), ns.
+        self.behind = LatencyStats()
         self._spec = StreamSpec(
             name=name,
             kind="image2d",
@@ -177,11 +181,13 @@ class SyntheticImage2d:
             if timeout is not None and wait_ns > timeout * 1e9:
                 time.sleep(timeout)
                 return None
-            if wait_ns > 200_000:
-                time.sleep((wait_ns - 150_000) / 1e9)  # sleep overshoots: spin the rest
-            while time.monotonic_ns() < due:
-                pass
+            if wait_ns > 0:
+                # A real link's read returns when the kernel wakes the reader: the stamp
+                # is taken then, late by the wake-up (no spinning, which would hold the
+                # GIL against the other readers of the session).
+                time.sleep(wait_ns / 1e9)
         arrival = time.monotonic_ns()
+        self.behind.add(arrival - due)
         data = self._frames[seq % self.period]
         block = FrameBlock(
             seq=np.array([seq], dtype=np.int64),

@@ -11,7 +11,9 @@ soon as it is decided:
   ``t0`` (a stream's frames come in time order): its place in the group is None;
 - a stream with nothing waiting may still deliver ``t0``: the group waits for it,
   unless some stream already delivered a frame later than ``t0 + max_wait_s`` (that
-  stream stalled or lost the frame): then the group goes out without it.
+  stream stalled or lost the frame): then the group goes out without it, and the
+  stream counts as stalled: later groups do not wait for it until it delivers again
+  (a stalled system costs the others one wait, not one per frame).
 
 A frame never waits for anything with one stream. The group is handed out the moment
 its last member arrives, so its latency is counted from the last of its frames' last
@@ -71,6 +73,7 @@ class FrameMatcher(Generic[T]):
         self._queues: list[deque[tuple[float, T]]] = [deque() for _ in range(n_streams)]
         self._newest = float("-inf")
         self._last = [float("-inf")] * n_streams
+        self._stalled = [False] * n_streams
         self.incomplete = 0
         self.late = 0
 
@@ -92,6 +95,7 @@ class FrameMatcher(Generic[T]):
             self.late += 1  # out of order within its own stream: cannot be matched
             return []
         self._last[stream] = time_s
+        self._stalled[stream] = False
         self._queues[stream].append((time_s, item))
         self._newest = max(self._newest, time_s)
         return self._drain()
@@ -111,15 +115,18 @@ class FrameMatcher(Generic[T]):
                 return out
             t0 = min(present)
             limit = t0 + self.tolerance_s
-            undecided = any(h is None for h in heads)
+            stalled = self._stalled
+            undecided = any(h is None and not stalled[i] for i, h in enumerate(heads))
             if undecided and self._newest <= t0 + self.max_wait_s:
                 return out
             group: list[T | None] = []
-            for qq, h in zip(queues, heads, strict=True):
+            for i, (qq, h) in enumerate(zip(queues, heads, strict=True)):
                 if h is not None and h <= limit:
                     group.append(qq.popleft()[1])
                 else:
                     group.append(None)
+                    if h is None:
+                        self._stalled[i] = True
             if any(g is None for g in group):
                 self.incomplete += 1
             out.append((t0, group))
@@ -127,7 +134,8 @@ class FrameMatcher(Generic[T]):
     @staticmethod
     def default_tolerances(rates_hz: Sequence[float]) -> tuple[float, float]:
         """Tolerance and wait, s: a quarter of the longest frame period of ``rates_hz``,
-        and three periods but at least 20 ms (a reader thread of a busy machine can be
-        descheduled for 10 ms: waiting less splits a pair of frames into two halves)."""
+        and three periods but at least 100 ms (on a busy machine one reader can fall
+        behind another by tens of ms: waiting less splits pairs of frames into halves;
+        a stalled stream costs the wait once)."""
         period = 1.0 / min(rates_hz)
-        return 0.25 * period, max(3.0 * period, 0.02)
+        return 0.25 * period, max(3.0 * period, 0.1)

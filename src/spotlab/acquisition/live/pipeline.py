@@ -143,7 +143,7 @@ class LivePipeline(SinkBase):
     tolerance_s, max_wait_s : float, optional
         Frame matching of several streams (see
         :class:`~spotlab.acquisition.live.matching.FrameMatcher`); default a quarter
-        of the frame period, and three periods but at least 20 ms.
+        of the frame period, and three periods but at least 100 ms.
     name : str
         Sink name in the session's reports.
     inline : bool
