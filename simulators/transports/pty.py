@@ -39,6 +39,8 @@ TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on Linux
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
 MAX_PENDING = 1 << 16
+#: ... or this many seconds of the line's bytes, if more (12 Mbaud: 600 kB).
+MAX_PENDING_S = 0.5
 
 
 def tty_baud(fd: int) -> int | None:
@@ -185,7 +187,7 @@ class PtyServer:
             if host_baud is not None and host_baud != seg.baud:
                 data = garble(data, seg.baud, host_baud, self._rng)
             self._pending += data
-        self._flush_pending(master)
+        self._flush_pending(master, max(MAX_PENDING, int((host_baud or 0) * MAX_PENDING_S / 10)))
         nxt = self.device.next_event_ns()
         wait = MAX_WAIT_S if nxt is None else min(max((nxt - now) / 1e9, MIN_WAIT_S), MAX_WAIT_S)
         writers = [master] if self._pending else []
@@ -204,7 +206,7 @@ class PtyServer:
             with contextlib.suppress(OSError):
                 os.read(self._wake_r, 64)
 
-    def _flush_pending(self, master: int) -> None:
+    def _flush_pending(self, master: int, limit: int = MAX_PENDING) -> None:
         while self._pending:
             try:
                 n = os.write(master, self._pending)
@@ -215,7 +217,7 @@ class PtyServer:
                 break
             self.stats["bytes_out"] += n
             del self._pending[:n]
-        if len(self._pending) > MAX_PENDING:
-            extra = len(self._pending) - MAX_PENDING
+        if len(self._pending) > limit:
+            extra = len(self._pending) - limit
             self.stats["overrun_bytes"] += extra
-            del self._pending[MAX_PENDING:]
+            del self._pending[limit:]
