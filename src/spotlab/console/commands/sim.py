@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
 from spotlab.simulators import service
+from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
 from spotlab.simulators.motions import MOTIONS
 
 if TYPE_CHECKING:
@@ -26,7 +27,7 @@ def add_parser(sub: Any) -> None:
         "the device path to open; with --tcp it is a socket:// URL. It serves until stopped "
         "(Ctrl-C, SIGTERM) or until --seconds have passed.",
     )
-    p.add_argument("family", choices=["selspot", "timer"], help="device family")
+    p.add_argument("family", choices=["selspot", "timer", "centroid"], help="device family")
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--pty", action="store_true", help="serve on a real pseudo-terminal (default)"
@@ -39,7 +40,12 @@ def add_parser(sub: Any) -> None:
         metavar="PORT",
         help="serve on 127.0.0.1:PORT (0 or omitted: any free port)",
     )
-    p.add_argument("--cameras", type=int, default=2, help="cameras, 1-4 (default 2)")
+    p.add_argument(
+        "--cameras",
+        type=int,
+        default=None,
+        help="cameras: selspot 1-4 (default 2), centroid 1-16 (default 8)",
+    )
     p.add_argument("--leds", type=int, default=8, help="LEDs, 1-128 (default 8)")
     p.add_argument(
         "--rate", type=float, default=100.0, help="frame rate the scene is built for, Hz"
@@ -97,14 +103,31 @@ def add_parser(sub: Any) -> None:
         metavar="N=SOURCE",
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
+    cen = p.add_argument_group("centroid (video cameras, passive markers)")
+    cen.add_argument("--markers", type=int, default=40, help="markers on the walking body (40)")
+    cen.add_argument(
+        "--ghosts", type=float, default=0.02, metavar="RATE",
+        help="fraction of (camera, marker) pairs that see a floor-reflection ghost (0.02)",
+    )  # fmt: skip
+    cen.add_argument("--noise-blobs", type=float, default=0.02, help="noise blobs per image")
+    cen.add_argument(
+        "--sunlight", action="append", default=[], metavar="[CAM@]AT:DURATION",
+        help="camera CAM (default 0) sees thousands of blobs from AT s after START:; repeat",
+    )  # fmt: skip
+    cen.add_argument(
+        "--camera-off", action="append", default=[], metavar="CAM@AT:DURATION",
+        help="camera CAM delivers no frames from AT s after START:; repeat",
+    )  # fmt: skip
+    cen.add_argument("--no-occlusion", action="store_true", help="body segments hide nothing")
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     p.set_defaults(run=run)
 
 
 def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
     """Simulator options from parsed command-line arguments."""
-    if not 1 <= args.cameras <= 4:
-        raise CommandError(f"--cameras must be 1 to 4, got {args.cameras}")
+    cameras = 2 if args.cameras is None else args.cameras
+    if not 1 <= cameras <= 4:
+        raise CommandError(f"--cameras must be 1 to 4, got {cameras}")
     if not 1 <= args.leds <= 128:
         raise CommandError(f"--leds must be 1 to 128, got {args.leds}")
     if not args.rate > 0:
@@ -115,7 +138,7 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
     if motion not in MOTIONS and not Path(motion).is_file():
         raise CommandError(f"--motion {motion!r} is neither {', '.join(MOTIONS)} nor a C3D file")
     return service.SelspotSimOptions(
-        cameras=args.cameras,
+        cameras=cameras,
         leds=args.leds,
         rate_hz=args.rate,
         seed=args.seed,
@@ -175,7 +198,30 @@ def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions
     return options
 
 
+def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
+    """Video-centroid simulator options from parsed command-line arguments."""
+    sun = [item if "@" in item else f"0@{item}" for item in args.sunlight]
+    options = CentroidSimOptions(
+        cameras=8 if args.cameras is None else args.cameras, markers=args.markers,
+        rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
+        rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
+        clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
+        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=",".join(sun),
+        camera_off=",".join(args.camera_off), occlusion=0 if args.no_occlusion else 1,
+        lab_name=args.lab_name or "centroid", lab=args.lab,
+    )  # fmt: skip
+    try:
+        options.validate()
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    return options
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.family == "centroid":
+        if args.tcp is not None:
+            raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
+        return _serve(args, serve_centroid_pty(centroid_options_from_args(args)))
     if args.family == "timer":
         if args.tcp is not None:
             raise CommandError("the timer simulator serves on a pseudo-terminal only (--pty)")
