@@ -67,6 +67,9 @@ class StreamSummary:
         Why the stream could not be decoded, empty if it could.
     live_stats : dict or None
         The driver's counters when the recording stopped, for comparison.
+    device_summary : dict or None
+        Family figures from the decoder's ``summary()`` if it has one (CEN: blobs
+        per frame, overflows and gaps per camera).
     """
 
     name: str
@@ -91,6 +94,7 @@ class StreamSummary:
     duration_source: str = ""
     undecodable: str = ""
     live_stats: dict[str, Any] | None = None
+    device_summary: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -211,6 +215,7 @@ def _stream_summary(state: StreamState, timing: FrameTiming | None) -> StreamSum
     stats = state.decoder_stats()
     duration, rate, source = timing.result() if timing is not None else (0.0, 0.0, "")
     family = state.metadata.get("family", "")
+    figures = getattr(state.decoder, "summary", None)
     return StreamSummary(
         name=state.name,
         family=family if isinstance(family, str) else str(family),
@@ -234,6 +239,7 @@ def _stream_summary(state: StreamState, timing: FrameTiming | None) -> StreamSum
         duration_source=source,
         undecodable=state.undecodable,
         live_stats=state.live_stats,
+        device_summary=figures() if callable(figures) else None,
     )
 
 

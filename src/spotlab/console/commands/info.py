@@ -50,4 +50,11 @@ def run(args: argparse.Namespace) -> int:
                 f"      device FIFO drops {s.get('device_dropped', 0)}, "
                 f"reconnects {s['reconnects']}, device resets {s.get('device_resets', 0)}"
             )
+        extra = s.get("device_summary") or {}
+        if "blobs_per_frame" in extra:
+            print(
+                f"      blobs {extra['blobs']} ({extra['blobs_per_frame']:.1f} per frame), "
+                f"overflow frames per camera {extra['overflow_frames']}, "
+                f"camera gaps {extra['camera_gaps']} ({extra['offline_frames']} frames offline)"
+            )
     return 0
