@@ -96,21 +96,39 @@ class CameraBlobs:
     seen: npt.NDArray[np.int8]
 
 
-def sight_blocked(center: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B:
-    """Lines of sight ``center -> X`` (M,) crossing a capsule (K,) the marker is not on.
+def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B:
+    """Lines of sight ``centers[c] -> X[m]`` crossing a capsule the marker is not on.
 
-    The closest points of the sight segment and each capsule axis are found in
-    closed form (clamped to both segments); a capsule counts when it is nearer
-    than its radius and lies in front of the marker (not at its very end).
+    Parameters
+    ----------
+    centers : ndarray, shape (C, 3)
+        Camera centres (mm).
+    X : ndarray, shape (M, 3)
+        Markers (mm).
+    a, b, radius : ndarray, shapes (K, 3), (K, 3), (K,)
+        Capsule axes and radii (mm).
+    on : ndarray of bool, shape (M, K)
+        Marker ``m`` is on capsule ``k``.
+
+    Returns
+    -------
+    ndarray of bool, shape (C, M)
+
+    Notes
+    -----
+    The closest points of each sight segment and capsule axis are found in closed
+    form (clamped to both segments); a capsule counts when it is nearer than its
+    radius and lies in front of the marker (not at its very end).
     """
-    d1 = X - center  # (M, 3)
+    c0 = centers[:, None, :]
+    d1 = X[None, :, :] - c0  # (C, M, 3)
     d2 = b - a  # (K, 3)
-    r = center - a  # (K, 3)
-    aa = np.einsum("ij,ij->i", d1, d1)[:, None]
-    ee = np.maximum(np.einsum("ij,ij->i", d2, d2), 1e-9)[None, :]
-    ff = np.einsum("ij,ij->i", d2, r)[None, :]
-    bb = d1 @ d2.T
-    cc = d1 @ r.T
+    r = c0 - a[None]  # (C, K, 3)
+    aa = np.einsum("cmi,cmi->cm", d1, d1)[..., None]  # (C, M, 1)
+    ee = np.maximum(np.einsum("ki,ki->k", d2, d2), 1e-9)  # (K,)
+    ff = np.einsum("ki,cki->ck", d2, r)[:, None, :]  # (C, 1, K)
+    bb = d1 @ d2.T  # (C, M, K)
+    cc = np.einsum("cmi,cki->cmk", d1, r)
     denom = aa * ee - bb * bb
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-9, np.clip((bb * ff - cc * ee) / denom, 0, 1), 0.0)
@@ -119,27 +137,26 @@ def sight_blocked(center: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B:
             t < 0, np.clip(-cc / aa, 0, 1), np.where(t > 1, np.clip((bb - cc) / aa, 0, 1), s)
         )
     t = np.clip(t, 0, 1)
-    p1 = center + s[..., None] * d1[:, None, :]
-    p2 = a[None] + t[..., None] * d2[None]
-    dist = np.linalg.norm(p1 - p2, axis=2)
+    p1 = c0[:, :, None, :] + s[..., None] * d1[:, :, None, :]
+    p2 = a + t[..., None] * d2
+    dist = np.linalg.norm(p1 - p2, axis=3)
     length = np.sqrt(aa)
-    in_front = s * length < length - radius[None, :] - 20.0
-    return np.asarray(((dist < radius[None, :]) & in_front & ~on).any(axis=1))
+    in_front = s * length < length - radius - 20.0
+    return np.asarray(((dist < radius) & in_front & ~on[None]).any(axis=2))
 
 
-def _discs(cam: Camera, X: F64, model: BlobModel) -> tuple[F64, F64, F64, B]:
-    """Image centroids (M, 2), diameters (px), raw peaks and whether each is in view."""
+def _project(cam: Camera, X: F64, model: BlobModel) -> tuple[F64, F64, F64, B]:
+    """Image centroids (N, 2), diameters (px), raw peaks and whether each is in view."""
     with np.errstate(invalid="ignore"):
         z = X @ cam.R[2] + cam.t[2]
-        good = np.isfinite(z) & (z > 100.0)
-        uv = np.full((X.shape[0], 2), np.nan)
-        if good.any():
-            uv[good] = cam.project(X[good])
+    good = np.isfinite(z) & (z > 100.0)
+    zz = np.where(good, z, 1.0)
+    uv = cam.project(np.where(good[:, None], X, np.nan))
     w, h = cam.size
-    f = float(cam.K[0, 0])
-    diameter = np.where(good, f * model.marker_diameter_mm / np.where(good, z, 1.0), 0.0)
-    peak = np.where(good, model.peak_at_4m * (4000.0 / np.where(good, z, 1.0)) ** 2, 0.0)
-    inside = good & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
+    diameter = np.where(good, float(cam.K[0, 0]) * model.marker_diameter_mm / zz, 0.0)
+    peak = np.where(good, model.peak_at_4m * (4000.0 / zz) ** 2, 0.0)
+    with np.errstate(invalid="ignore"):
+        inside = good & (uv >= 0).all(axis=1) & (uv[:, 0] <= w - 1) & (uv[:, 1] <= h - 1)
     return uv, diameter, peak, np.asarray(inside)
 
 
@@ -151,6 +168,7 @@ def render_camera(
     *,
     capsules: tuple[F64, F64, F64] | None = None,
     on_capsule: B | None = None,
+    hidden: B | None = None,
     ghosts: B | None = None,
     sun_blobs: int = 0,
 ) -> CameraBlobs:
@@ -170,65 +188,71 @@ def render_camera(
         Body segments that occlude.
     on_capsule : ndarray of bool, shape (M, K), optional
         Marker ``m`` is on capsule ``k`` (not occluded by it).
+    hidden : ndarray of bool, shape (M,), optional
+        Markers already known to be occluded (:func:`sight_blocked` for several
+        cameras at once), instead of ``capsules``.
     ghosts : ndarray of bool, shape (M,), optional
         Markers whose floor reflection this camera sees.
     sun_blobs : int
         Sunlight blobs to add (random, bright).
     """
     m = X.shape[0]
-    uv, diam, peak, inside = _discs(cam, X, model)
-    if capsules is not None and inside.any():
+    with_ghosts = ghosts is not None and bool(ghosts.any())
+    pts = np.concatenate([X, X[ghosts] * np.array([1.0, 1.0, -1.0])]) if with_ghosts else X
+    uv, diam, peak, inside = _project(cam, pts, model)
+    marker = np.concatenate([np.arange(m), np.full(pts.shape[0] - m, -1)]).astype(np.int64)
+    kind = np.full(pts.shape[0], KIND_GHOST, np.int8)
+    kind[:m] = KIND_MARKER
+    peak[m:] *= model.ghost_gain
+    if capsules is not None and inside[:m].any():
         on = on_capsule if on_capsule is not None else np.zeros((m, capsules[2].size), bool)
-        blocked = np.zeros(m, dtype=bool)
-        blocked[inside] = sight_blocked(cam.center, X[inside], *capsules, on[inside])
-        inside &= ~blocked
+        vis = np.flatnonzero(inside[:m])
+        inside[vis] &= ~sight_blocked(cam.center[None], X[vis], *capsules, on[vis])[0]
+    if hidden is not None:
+        inside[:m] &= ~hidden
+    seen = np.where(inside[:m], OWN_BLOB, HIDDEN).astype(np.int8)
+    n_noise = int(rng.poisson(model.noise_blobs)) if model.noise_blobs > 0 else 0
+    if n_noise or sun_blobs:
+        w, h = cam.size
+        extra = n_noise + sun_blobs
+        uv = np.concatenate([uv, rng.uniform([0, 0], [w - 1, h - 1], (extra, 2))])
+        diam = np.concatenate([diam, rng.uniform(1.5, 3.0, n_noise), rng.uniform(2, 6, sun_blobs)])
+        peak = np.concatenate([peak, np.full(n_noise, 60.0), np.full(sun_blobs, 400.0)])
+        marker = np.concatenate([marker, np.full(extra, -1, np.int64)])
+        kind = np.concatenate(
+            [kind, np.full(n_noise, KIND_NOISE, np.int8), np.full(sun_blobs, KIND_SUN, np.int8)]
+        )
+        inside = np.concatenate([inside, np.ones(extra, dtype=bool)])
     idx = np.flatnonzero(inside)
-    parts_uv, parts_d, parts_pk = [uv[idx]], [diam[idx]], [peak[idx]]
-    parts_marker, parts_kind = [idx.astype(np.int64)], [np.full(idx.size, KIND_MARKER, np.int8)]
-    if ghosts is not None and ghosts.any():
-        mirror = X[ghosts] * np.array([1.0, 1.0, -1.0])
-        guv, gd, gpk, gin = _discs(cam, mirror, model)
-        parts_uv.append(guv[gin])
-        parts_d.append(gd[gin])
-        parts_pk.append(gpk[gin] * model.ghost_gain)
-        parts_marker.append(np.full(int(gin.sum()), -1, np.int64))
-        parts_kind.append(np.full(int(gin.sum()), KIND_GHOST, np.int8))
-    w, h = cam.size
-    for count, extra_kind, d_lo, d_hi, extra_peak in (
-        (
-            rng.poisson(model.noise_blobs) if model.noise_blobs > 0 else 0,
-            KIND_NOISE,
-            1.5,
-            3.0,
-            60.0,
-        ),
-        (sun_blobs, KIND_SUN, 2.0, 6.0, 400.0),
-    ):
-        if count:
-            parts_uv.append(rng.uniform([0, 0], [w - 1, h - 1], (count, 2)))
-            parts_d.append(rng.uniform(d_lo, d_hi, count))
-            parts_pk.append(np.full(count, extra_peak))
-            parts_marker.append(np.full(count, -1, np.int64))
-            parts_kind.append(np.full(count, extra_kind, np.int8))
-    true_uv, d, pk = np.concatenate(parts_uv), np.concatenate(parts_d), np.concatenate(parts_pk)
-    marker, kind = np.concatenate(parts_marker), np.concatenate(parts_kind)
+    true_uv, d, pk, marker, kind = uv[idx], diam[idx], peak[idx], marker[idx], kind[idx]
     area = np.maximum(np.pi * d * d / 4, 1.0)
-    flags = np.zeros(true_uv.shape[0], dtype=np.uint8)
-    seen = np.zeros(m, dtype=np.int8)
-    seen[idx] = OWN_BLOB
-    if 1 < true_uv.shape[0] <= MERGE_LIMIT:
+    flags = np.zeros(idx.size, dtype=np.uint8)
+    if 1 < idx.size <= MERGE_LIMIT:
         true_uv, d, pk, area, marker, kind, flags = _merge(true_uv, d, pk, area, marker, kind, seen)
+    return _finish(cam, true_uv, d, pk, area, marker, kind, flags, seen, model, rng)
+
+
+def _finish(
+    cam: Camera, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
+    kind: npt.NDArray[np.int8], flags: npt.NDArray[np.uint8], seen: npt.NDArray[np.int8],
+    model: BlobModel, rng: np.random.Generator,
+) -> CameraBlobs:  # fmt: skip
+    """Noise, flags and scan order."""
+    w, h = cam.size
     r = d / 2
-    noisy = true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape)
-    noisy[:, 0] = np.clip(noisy[:, 0], 0, w - 1)
-    noisy[:, 1] = np.clip(noisy[:, 1], 0, h - 1)
+    noisy = np.clip(
+        true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape), 0, [w - 1, h - 1]
+    )
     edge = (
         (true_uv - r[:, None] < 0).any(axis=1)
         | (true_uv[:, 0] + r > w - 1)
         | (true_uv[:, 1] + r > h - 1)
     )
-    flags |= np.where(edge, EDGE, 0).astype(np.uint8)
-    flags |= np.where(pk > 255, SATURATED, 0).astype(np.uint8)
+    flags = (
+        flags
+        | np.where(edge, EDGE, 0).astype(np.uint8)
+        | np.where(pk > 255, SATURATED, 0).astype(np.uint8)
+    )
     order = np.lexsort((true_uv[:, 0], true_uv[:, 1] - r))
     return CameraBlobs(
         uv=noisy[order], area=np.rint(area[order]), peak=np.minimum(pk[order], 255.0),
@@ -243,12 +267,14 @@ def _merge(
 ) -> tuple[F64, F64, F64, F64, I64, npt.NDArray[np.int8], npt.NDArray[np.uint8]]:  # fmt: skip
     """Blobs whose discs overlap become one (area-weighted centroid, merged flag)."""
     n = uv.shape[0]
-    dist = np.linalg.norm(uv[:, None] - uv[None], axis=2)
-    touch = dist < (d[:, None] + d[None]) / 2
-    np.fill_diagonal(touch, False)
+    du = np.subtract.outer(uv[:, 0], uv[:, 0])
+    dv = np.subtract.outer(uv[:, 1], uv[:, 1])
+    reach = np.add.outer(d, d)
+    touch = 4 * (du * du + dv * dv) < reach * reach  # the diagonal is always true
     flags = np.zeros(n, dtype=np.uint8)
-    if not touch.any():
+    if np.count_nonzero(touch) == n:
         return uv, d, pk, area, marker, kind, flags
+    np.fill_diagonal(touch, False)
     parent = list(range(n))
 
     def root(k: int) -> int:

@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from spotlab.geometry import Rig
 from spotlab.simulators import centroid_wire as cw
-from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_camera
+from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_camera, sight_blocked
 from spotlab.simulators.centroid_body import GaitBody, carried_by, segment_capsules
 from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
@@ -121,7 +121,10 @@ class CentroidStream(SpxStream):
         w_exp = w_trig + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (n,)
         scene_s = (w_exp - self.clock.epoch_ns) * 1e-9
         online = [not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams]
-        X_all = dev.positions(scene_s)  # (n, M_all, 3)
+        t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
+        X_both = dev.positions(np.append(scene_s, t_mid))  # (n + 1, M, 3)
+        X_all = X_both[:-1]
+        hidden = dev.occluded(X_all[0], self.cams)
         records = []
         truth_cams: list[CameraTruth] = []
         for j, c in enumerate(self.cams):
@@ -130,7 +133,7 @@ class CentroidStream(SpxStream):
                 truth_cams.append(None)
                 continue
             sun = SUN_BLOBS if any(e.active(c, since_start) for e in dev.sunlight) else 0
-            blobs = dev.render(c, X_all[j], sun)
+            blobs = dev.render(c, X_all[j], sun, hidden[j])
             n_found = blobs.uv.shape[0]
             keep = min(n_found, cfg.max_blobs)
             tick = round(dev.camera_clocks[c].device_us(round(w_exp[j])))
@@ -149,13 +152,12 @@ class CentroidStream(SpxStream):
         )  # fmt: skip
         self._outbox[self.frame_no] = payload
         self._last_bytes = len(payload) + cw.FRAME_OVERHEAD
-        t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
         row = TruthRow(
             stream=self.index, frame_no=self.frame_no, world_ns=w_trig, device_us=self._tick,
             led_ids=np.zeros(0, dtype=np.int64), positions=np.zeros((0, 3)),
         )  # fmt: skip
         if dev.truth is not None:
-            dev.truth.add(row, t_mid, dev.positions(np.array([t_mid]))[0], self.cams, truth_cams)
+            dev.truth.add(row, t_mid, X_both[-1], self.cams, truth_cams)
         steps = self.clock.step_count(self._osc0)
         taken = TakenFrame(
             frame_no=self.frame_no, device_us=self._tick, reading=_NO_READING,
@@ -280,15 +282,23 @@ class CentroidDevice(SelspotDevice):
         extra = self._static.positions(0.0)[: self.n_markers - 40]
         return np.concatenate([X, np.broadcast_to(extra, (t.size, *extra.shape))], axis=1)
 
-    def render(self, camera: int, X: F64, sun_blobs: int = 0) -> CameraBlobs:
+    def occluded(self, X: F64, cameras: list[int]) -> npt.NDArray[np.bool_]:
+        """(n, M): markers ``X`` (M, 3) hidden by body segments from these cameras."""
+        m = X.shape[0]
+        if not self.occlusion or m < 40:
+            return np.zeros((len(cameras), m), dtype=bool)
+        on = np.zeros((m, self._on_capsule.shape[1]), dtype=bool)
+        on[:40] = self._on_capsule
+        centers = np.stack([self.rig.cameras[c].center for c in cameras])
+        return sight_blocked(centers, X, *segment_capsules(X[:40]), on)
+
+    def render(
+        self, camera: int, X: F64, sun_blobs: int = 0, hidden: npt.NDArray[np.bool_] | None = None
+    ) -> CameraBlobs:
         """One camera's blobs for markers ``X`` (M, 3) (see :func:`render_camera`)."""
-        body = X[:40] if X.shape[0] >= 40 else self.body.all_markers(np.zeros(1))[0]
-        caps = segment_capsules(body) if self.occlusion and X.shape[0] >= 40 else None
-        on = np.zeros((X.shape[0], 9), dtype=bool)
-        on[: min(40, X.shape[0])] = self._on_capsule[: min(40, X.shape[0])]
         return render_camera(
-            self.rig.cameras[camera], X, self.model, self._blob_rng, capsules=caps,
-            on_capsule=on, ghosts=self.ghost_pairs[camera], sun_blobs=sun_blobs,
+            self.rig.cameras[camera], X, self.model, self._blob_rng, hidden=hidden,
+            ghosts=self.ghost_pairs[camera], sun_blobs=sun_blobs,
         )  # fmt: skip
 
     # -- life cycle ----------------------------------------------------------------
