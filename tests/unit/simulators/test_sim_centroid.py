@@ -170,3 +170,17 @@ def test_bad_options_are_refused(bad: str) -> None:
 
     with pytest.raises(ValueError):
         centroid_options_from_url(f"sim://centroid?{bad}")
+
+
+def test_link_faults_are_detected_and_counted(tmp_path: Path) -> None:
+    log = tmp_path / "faults.json"
+    opts = CentroidSimOptions(
+        cameras=2, markers=10, rate_hz=100, seed=6, fault_log=log,
+        faults="bitflip@0.1,truncate@0.2,duplicate@0.3,garbage@0.35,overflow@0.4:2",
+    )  # fmt: skip
+    blocks, driver = _record(centroid_url_for(opts), 0.8, cameras=2, rate_hz=100)
+    s = driver.stats
+    assert s.crc_errors >= 2 and s.duplicates == 1 and s.device_dropped == 2
+    assert s.lost_frames == 4  # 2 damaged on the link + 2 dropped by the device
+    bf = blobs_from_blocks(blocks)
+    assert np.all(np.diff(bf.seq) >= 1) and bf.n_frames >= 60
