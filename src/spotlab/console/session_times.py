@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,15 +30,29 @@ from spotlab.drivers.timer import extract_edges
 TIMER_FAMILY = "timer"
 
 
-def read_streams(
-    path: str | os.PathLike[str],
-) -> tuple[list[DeviceFrames], TimerFrames | None, dict[str, StreamSpec]]:
-    """Decode every stream of a recording into frame arrays (timer edges apart).
+@dataclass(frozen=True)
+class DecodedStreams:
+    """Every decoded block of every stream of a recording, by stream name.
+
+    Attributes
+    ----------
+    blocks : dict of str to list of FrameBlock
+        In recording order.
+    metadata : dict of str to dict
+        The stream's metadata (family, spec, ...), as last announced.
+    """
+
+    blocks: dict[str, list[FrameBlock]]
+    metadata: dict[str, dict[str, object]]
+
+
+def decode_streams(path: str | os.PathLike[str]) -> DecodedStreams:
+    """Decode every block of every stream of a recording (damaged blocks skipped).
 
     Raises
     ------
     CommandError
-        If the recording holds no decoded frames, or several timer streams.
+        If the recording holds no decoded frames.
     """
     blocks: dict[str, list[FrameBlock]] = {}
     meta: dict[str, dict[str, object]] = {}
@@ -47,6 +62,23 @@ def read_streams(
             meta[state.name] = state.metadata
     if not blocks:
         raise CommandError(f"{path}: the recording holds no decoded frames")
+    return DecodedStreams(blocks, meta)
+
+
+def read_streams(
+    path: str | os.PathLike[str], decoded: DecodedStreams | None = None
+) -> tuple[list[DeviceFrames], TimerFrames | None, dict[str, StreamSpec]]:
+    """Decode every stream of a recording into frame arrays (timer edges apart).
+
+    ``decoded``: the recording already decoded by :func:`decode_streams` (not again).
+
+    Raises
+    ------
+    CommandError
+        If the recording holds no decoded frames, or several timer streams.
+    """
+    decoded = decode_streams(path) if decoded is None else decoded
+    blocks, meta = decoded.blocks, decoded.metadata
     devices: list[DeviceFrames] = []
     timers: list[TimerFrames] = []
     specs: dict[str, StreamSpec] = {}
