@@ -150,10 +150,15 @@ class StreamTiming:
         """
         if self.spec is None:
             raise SynchronisationError(f"stream {self.name!r}: no spec, no sample offsets")
-        rate = 1.0
-        if self.model is not None:
-            rate = float(np.median([s.rate for s in self.model.segments])) * self.spec.tick_hz
-        return sample_times(self.time_s, self.spec, clock_rate=rate)
+        return sample_times(self.time_s, self.spec, clock_rate=self.clock_rate)
+
+    @property
+    def clock_rate(self) -> float:
+        """Session seconds per device second (``1 + drift``; the median over the clock
+        model's segments), 1.0 without a model or spec."""
+        if self.model is None or self.spec is None:
+            return 1.0
+        return float(np.median([s.rate for s in self.model.segments])) * self.spec.tick_hz
 
     def report(self) -> dict[str, Any]:
         """JSON-safe summary: method, pairs, drift, jitter, events, notes."""
