@@ -110,7 +110,7 @@ def test_missing_readings_stay_missing_and_markers_may_differ_in_count() -> None
 
 def test_bad_inputs_are_one_clear_error() -> None:
     a, b = two_streams()
-    with pytest.raises(CommandError, match="8 .*selspot0: 4, selspot1: 4"):
+    with pytest.raises(CommandError, match=r"8 .*selspot0: 4, selspot1: 4"):
         check_rig(Rig(list(RIG)[:6]), {"selspot0": 4, "selspot1": 4})
     with pytest.raises(CommandError, match="no image2d stream"):
         synchronise_observations([])
