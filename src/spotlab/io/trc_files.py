@@ -98,7 +98,8 @@ def write_trc(path: str | Path, trial: Trial) -> None:
     """Write the trial's points as a TRC file (PathFileType 4, tab-separated, mm).
 
     Missing samples are written as empty fields; analog data and events are not
-    part of the TRC format and are left out.
+    part of the TRC format and are left out. Frame ``f`` is at time ``(f - 1) / rate``
+    (the C3D convention: a trial that starts at ``first_frame`` 11 starts at 10 / rate s).
     """
     trial.check(path)
     n_frames, n_markers = trial.n_frames, trial.n_markers
@@ -116,7 +117,7 @@ def write_trc(path: str | Path, trial: Trial) -> None:
         "",
     ]
     frames = trial.first_frame + np.arange(n_frames)
-    times = np.arange(n_frames) / trial.point_rate
+    times = (trial.first_frame - 1 + np.arange(n_frames)) / trial.point_rate
     coords = trial.points.reshape(n_frames, 3 * n_markers)
     body = []
     for i in range(n_frames):

@@ -46,6 +46,7 @@ def test_round_trip_with_gaps(tmp_path: Path) -> None:
     back = read_trc(tmp_path / "g.trc")
     assert np.array_equal(back.points, points, equal_nan=True)  # repr() keeps every bit
     assert back.first_frame == 11 and back.labels == trial.labels
+    assert back.metadata["times"][0] == pytest.approx(10 / 120.0, abs=1e-6)  # (f - 1) / rate
 
 
 def test_metres_are_converted(tmp_path: Path) -> None:
