@@ -145,6 +145,10 @@ class Identifier:
         C, S = len(rig), len(model.segments)
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
+        M = len(model.labels)
+        i, j, _, _ = model.intervals
+        self._linked = np.zeros((M, M), dtype=bool)  # segment mates or links
+        self._linked[i, j] = self._linked[j, i] = True
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -194,15 +198,13 @@ class Identifier:
         long_gap = tracks.missed >= self.keep_label_frames
         tracks.update(X, _rms(ray), kept.sum(axis=0))
         # After more than a short gap a track may have caught another marker's blobs:
-        # it keeps its label only where two labelled cluster mates can check it
+        # it keeps its label only where two labelled partners can check it
         # (inconsistent_labels), else the label is earned again from the cluster.
         back = np.flatnonzero(long_gap & (tracks.missed == 0) & (tracks.label >= 0))
         if back.size:
-            mates = (tracks.label >= 0) & (tracks.missed == 0) & ~long_gap
-            present = np.bincount(
-                self._segment_of[tracks.label[mates]], minlength=len(self.model.segments)
-            )
-            lone = back[present[self._segment_of[tracks.label[back]]] < 2]
+            mates = tracks.label[(tracks.label >= 0) & (tracks.missed == 0) & ~long_gap]
+            present = self._linked[np.ix_(tracks.label[back], mates)].sum(axis=1)
+            lone = back[present < 2]
             tracks.label[lone] = -1
             tracks.age[lone] = 0
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
@@ -277,6 +279,7 @@ class Identifier:
     def _update_anchors(self) -> None:
         tracks = self.tracks
         lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
+        lab = lab[self._segment_of[tracks.label[lab]] >= 0]
         seg = self._segment_of[tracks.label[lab]]
         S = self._anchors.shape[0]
         n = np.bincount(seg, minlength=S)

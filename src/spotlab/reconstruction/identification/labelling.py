@@ -12,7 +12,11 @@ Two jobs, both on the 3-D points of one frame:
   distances within ``tol_mm``), and among those with the most markers the identity with
   the smallest RMS fit is chosen (:func:`choose_identity`; Woltring & Huiskes 1990:
   "one may use the rms fitting error to decide between candidate solutions"). A choice
-  whose runner-up is within ``margin_mm`` is ambiguous and not taken.
+  whose runner-up is within ``margin_mm`` is ambiguous and not taken. Markers still
+  missing after the segment fits (a marker on no rigid cluster, or a segment with fewer
+  than three markers in view) are labelled by the distance ranges to their labelled
+  partners (:class:`.model.Link`, segment mates), only where the point and the marker
+  fit each other and nothing else.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ IntArray = NDArray[np.intp]
 def inconsistent_labels(
     model: MarkerModel, points: FloatArray, age: IntArray, tol_mm: float
 ) -> NDArray[np.bool_]:
-    """Labelled points that do not fit their segment.
+    """Labelled points that do not fit their segment or their links.
 
     Parameters
     ----------
@@ -46,15 +50,16 @@ def inconsistent_labels(
         Frames each label has been held (kept for callers that rank labels; two markers
         whose only distance disagrees both lose their labels).
     tol_mm : float
-        Largest accepted error of a model distance.
+        Largest accepted error of a model distance (or distance outside a link's range).
 
     Returns
     -------
     ndarray of bool, shape (M,)
         True for labels to drop.
     """
-    i, j, d = model.pairs()
-    err = np.abs(np.linalg.norm(points[i] - points[j], axis=1) - d)
+    i, j, lo, hi = model.intervals
+    dist = np.linalg.norm(points[i] - points[j], axis=1)
+    err = np.maximum(np.maximum(lo - dist, dist - hi), 0.0)  # NaN where one is missing
     both = np.isfinite(err)
     bad = both & (err > tol_mm)
     M = points.shape[0]
@@ -117,6 +122,7 @@ def assign_labels(
     margin_mm: float,
     near_mm: float = 600.0,
     anchors: FloatArray | None = None,
+    min_links: int = 3,
 ) -> IntArray:
     """Labels for the unlabelled points of one frame.
 
@@ -137,6 +143,9 @@ def assign_labels(
         Only points within this distance of a segment's anchor are tried for it.
     anchors : ndarray, shape (S, 3), optional
         Last known centre of each segment (NaN where unknown: every point is tried).
+    min_links : int
+        Labelled partners (links or segment mates) a marker needs to be labelled by
+        distance ranges alone, after the segment fits.
 
     Returns
     -------
@@ -175,7 +184,52 @@ def assign_labels(
                 out[k] = seg.markers[p]
                 point_of[seg.markers[p]] = k
         pending.remove(s)
+    for _ in range(3):  # labels found by links constrain the next markers
+        if not _linked_labels(model, points, out, point_of, tol_mm, min_links):
+            break
     return out
+
+
+def _linked_labels(
+    model: MarkerModel,
+    points: FloatArray,
+    labels: IntArray,
+    point_of: IntArray,
+    tol_mm: float,
+    min_links: int,
+) -> bool:
+    """Label free points by the distance ranges to labelled markers; True if any was.
+
+    A free point fits a missing marker when its distances to at least ``min_links``
+    labelled markers linked to it (segment mates included) are all within their ranges
+    (``tol_mm`` beyond); a pair is taken only where the marker fits one point and the
+    point fits one marker, so two candidates leave both unlabelled.
+    """
+    free = np.flatnonzero(labels < 0)
+    missing = np.flatnonzero(point_of < 0)
+    if free.size == 0 or missing.size == 0:
+        return False
+    i, j, lo, hi = model.intervals
+    # constraints of each missing marker m: a labelled partner n with its range
+    m_all = np.concatenate([i, j])
+    n_all = np.concatenate([j, i])
+    lo2, hi2 = np.concatenate([lo, lo]), np.concatenate([hi, hi])
+    use = (point_of[m_all] < 0) & (point_of[n_all] >= 0)
+    if not use.any():
+        return False
+    m_c, n_c, lo_c, hi_c = m_all[use], n_all[use], lo2[use], hi2[use]
+    dist = np.linalg.norm(points[free][:, None] - points[point_of[n_c]][None], axis=2)  # (P, L)
+    ok = (dist >= lo_c - tol_mm) & (dist <= hi_c + tol_mm)
+    slot = np.searchsorted(missing, m_c)
+    n_checks = np.bincount(slot, minlength=missing.size)
+    bad = np.zeros((free.size, missing.size), dtype=np.intp)
+    np.add.at(bad.T, slot, (~ok).T.astype(np.intp))
+    fits = (bad == 0) & (n_checks >= min_links)[None]  # (P, missing)
+    unique = fits & (fits.sum(axis=1, keepdims=True) == 1) & (fits.sum(axis=0) == 1)[None]
+    p, k = np.nonzero(unique)
+    labels[free[p]] = missing[k]
+    point_of[missing[k]] = free[p]
+    return bool(p.size)
 
 
 def _segment_labels(

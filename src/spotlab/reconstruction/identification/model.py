@@ -1,18 +1,24 @@
-"""A marker model: named markers grouped into rigid clusters (segments) with their layout.
+"""A marker model: named markers on rigid clusters (segments) and distance links.
 
-Identification labels points by fitting these clusters (:mod:`.labelling`). A model is
-learnt from labelled trajectories — a static trial, the first frames of a labelled
-recording, a simulator's truth — either with the segments given or with the clusters
-found as the groups of markers whose distances stay constant (:meth:`MarkerModel.infer`),
-and kept as JSON.
+Identification labels points by fitting these clusters (:mod:`.labelling`). Markers of a
+real body are not all on rigid clusters (skin over a joint, a marker between two
+segments): their distances to other markers vary within a range as the body moves.
+Such pairs are kept as *links*, the range of the distance seen in a trial that moves
+(minimum and maximum, mm); a marker on no cluster of three is labelled by its links
+alone. A model is learnt from labelled trajectories — a range-of-motion trial, a
+labelled recording, a simulator's truth — either with the segments given or with the
+clusters found as the groups of markers whose distances stay constant
+(:meth:`MarkerModel.infer`), and kept as JSON.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -23,9 +29,31 @@ from scipy.spatial.distance import squareform
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction.rigid import rigid_pose
 
-__all__ = ["MarkerModel", "Segment"]
+__all__ = ["Link", "MarkerModel", "Segment"]
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+#: Links a marker on no rigid cluster needs to be labelled by its links alone.
+MIN_LINKS = 3
+
+
+@dataclass(frozen=True)
+class Link:
+    """Two markers whose distance stays within ``[min_mm, max_mm]``.
+
+    Attributes
+    ----------
+    a, b : int
+        Marker indices in :attr:`MarkerModel.labels`.
+    min_mm, max_mm : float
+        Range of their distance (mm).
+    """
+
+    a: int
+    b: int
+    min_mm: float
+    max_mm: float
 
 
 @dataclass(frozen=True)
@@ -54,11 +82,15 @@ class MarkerModel:
     ----------
     labels : tuple of str, length M
     segments : tuple of Segment
-        Every marker belongs to exactly one segment.
+        Rigid clusters; a marker belongs to one at most.
+    links : tuple of Link
+        Distance ranges of marker pairs not on a common segment. A marker on no
+        segment needs at least three.
     """
 
     labels: tuple[str, ...]
     segments: tuple[Segment, ...]
+    links: tuple[Link, ...] = ()
 
     def __post_init__(self) -> None:
         M = len(self.labels)
@@ -74,21 +106,49 @@ class MarkerModel:
             if np.any(owner[list(seg.markers)] >= 0):
                 raise ReconstructionError(f"segment {seg.name!r} shares markers with another")
             owner[list(seg.markers)] = s
-        if np.any(owner < 0):
-            lost = [self.labels[m] for m in np.flatnonzero(owner < 0)]
-            raise ReconstructionError(f"markers on no segment: {', '.join(lost)}")
+        n_links = np.zeros(M, dtype=np.intp)
+        for link in self.links:
+            if not (0 <= link.a < M and 0 <= link.b < M) or link.a == link.b:
+                raise ReconstructionError(f"link {link} does not join two of the {M} markers")
+            if not 0.0 <= link.min_mm <= link.max_mm:
+                raise ReconstructionError(f"link {link}: need 0 <= min_mm <= max_mm")
+            n_links[[link.a, link.b]] += 1
+        lost = np.flatnonzero((owner < 0) & (n_links < MIN_LINKS))
+        if lost.size:
+            raise ReconstructionError(
+                "markers on no rigid cluster of 3 or more and with fewer than "
+                f"{MIN_LINKS} distance links: {', '.join(self.labels[m] for m in lost)}"
+            )
 
     @property
     def segment_of(self) -> NDArray[np.intp]:
-        """Segment index of each marker, shape (M,)."""
-        out = np.empty(len(self.labels), dtype=np.intp)
+        """Segment index of each marker, shape (M,); -1 for a marker on no segment."""
+        out = np.full(len(self.labels), -1, dtype=np.intp)
         for s, seg in enumerate(self.segments):
             out[list(seg.markers)] = s
         return out
 
+    @cached_property
+    def intervals(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+        """Every constrained pair ``(i, j, min mm, max mm)``: segment pairs (min = max,
+        their model distance), then links."""
+        i, j, d = self.pairs()
+        a = np.array([k.a for k in self.links], dtype=np.intp)
+        b = np.array([k.b for k in self.links], dtype=np.intp)
+        lo = np.array([k.min_mm for k in self.links], dtype=np.float64)
+        hi = np.array([k.max_mm for k in self.links], dtype=np.float64)
+        return (
+            np.concatenate([i, a]),
+            np.concatenate([j, b]),
+            np.concatenate([d, lo]),
+            np.concatenate([d, hi]),
+        )
+
     def pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
         """Marker pairs of the same segment ``(i, j, distance mm)``, each once."""
-        i_all, j_all, d_all = [], [], []
+        i_all: list[IntArray] = [np.zeros(0, np.intp)]
+        j_all: list[IntArray] = [np.zeros(0, np.intp)]
+        d_all: list[FloatArray] = [np.zeros(0)]
         for seg in self.segments:
             m = np.array(seg.markers)
             i, j = np.triu_indices(m.size, 1)
@@ -99,9 +159,14 @@ class MarkerModel:
 
     @classmethod
     def from_trajectories(
-        cls, labels: Sequence[str], positions: Any, segments: Mapping[str, Sequence[str]]
+        cls,
+        labels: Sequence[str],
+        positions: Any,
+        segments: Mapping[str, Sequence[str]],
+        *,
+        link_spread_mm: float | None = None,
     ) -> MarkerModel:
-        """Learn each segment's layout from labelled trajectories.
+        """Learn each segment's layout (and links) from labelled trajectories.
 
         Parameters
         ----------
@@ -109,7 +174,11 @@ class MarkerModel:
         positions : array_like, shape (F, M, 3)
             Labelled marker positions (mm), NaN where missing.
         segments : mapping of str to sequence of str
-            Segment name -> its marker labels.
+            Segment name -> its marker labels (3 or more each).
+        link_spread_mm : float, optional
+            Link every pair of markers not on a common segment whose distance varies by
+            less than this over the frames (its range seen is the link's). None: no
+            links, every marker must be on a segment.
 
         Returns
         -------
@@ -120,12 +189,11 @@ class MarkerModel:
         Raises
         ------
         ReconstructionError
-            For an unknown label, a segment never seen complete, or a bad shape.
+            For an unknown label, a segment never seen complete, a bad shape, or a
+            marker that can be labelled neither by a segment nor by its links.
         """
         labels = tuple(str(x) for x in labels)
-        X = np.asarray(positions, dtype=np.float64)
-        if X.ndim != 3 or X.shape[1:] != (len(labels), 3):
-            raise ReconstructionError(f"positions must have shape (F, {len(labels)}, 3)")
+        X = _positions(positions, len(labels))
         index = {name: m for m, name in enumerate(labels)}
         out = []
         for name, members in segments.items():
@@ -142,48 +210,74 @@ class MarkerModel:
             local = np.einsum("fji,fpj->fpi", pose.R, complete - pose.t[:, None, :])
             coords = local[pose.valid].mean(axis=0) if pose.valid.any() else first
             out.append(Segment(str(name), tuple(m), coords - coords.mean(axis=0)))
-        return cls(labels, tuple(out))
+        links: list[Link] = []
+        if link_spread_mm is not None:
+            lo, hi = _distance_range(X)
+            owner = np.full(len(labels), -1)
+            for s, seg in enumerate(out):
+                owner[list(seg.markers)] = s
+            a, b = np.triu_indices(len(labels), 1)
+            keep = (hi[a, b] - lo[a, b] < link_spread_mm) & (
+                (owner[a] < 0) | (owner[a] != owner[b])
+            )
+            links = [
+                Link(int(i), int(j), float(lo[i, j]), float(hi[i, j]))
+                for i, j in zip(a[keep], b[keep], strict=True)
+            ]
+        return cls(labels, tuple(out), tuple(links))
 
     @classmethod
     def infer(
-        cls, labels: Sequence[str], positions: Any, *, tolerance_mm: float = 2.0
+        cls,
+        labels: Sequence[str],
+        positions: Any,
+        *,
+        tolerance_mm: float = 2.0,
+        link_spread_mm: float | None = None,
     ) -> MarkerModel:
         """Find the rigid clusters themselves: markers whose distances stay constant.
 
         Two markers are rigidly linked when the spread (max - min) of their distance
         over the frames where both are seen is below ``tolerance_mm``; a segment is a
-        group in which every pair is linked (complete-linkage clustering of the
-        spreads, cut at ``tolerance_mm``), so markers near a joint, linked to both
-        neighbours, do not join two segments into one. A trial that hardly moves makes
-        every marker look rigid: learn from one in which the segments move.
+        group of 3 or more in which every pair is linked (complete-linkage clustering of
+        the spreads, cut at ``tolerance_mm``), so markers near a joint, linked to both
+        neighbours, do not join two segments into one. With ``link_spread_mm``, pairs
+        whose distance varies by less than that become links (see
+        :meth:`from_trajectories`) and markers on no cluster of 3 are labelled by them;
+        a group on a line (its rotation about the line unknown) is no segment either.
+        A trial that hardly moves makes every marker look rigid: learn from one in which
+        the segments move through their range.
 
         Raises
         ------
         ReconstructionError
-            When a group has fewer than 3 markers (it cannot be identified by shape).
+            When a marker is on no cluster of 3 or more and has fewer than 3 links.
         """
         labels = tuple(str(x) for x in labels)
-        X = np.asarray(positions, dtype=np.float64)
-        if X.ndim != 3 or X.shape[1:] != (len(labels), 3):
-            raise ReconstructionError(f"positions must have shape (F, {len(labels)}, 3)")
-        D = np.linalg.norm(X[:, :, None] - X[:, None], axis=-1)
-        with np.errstate(invalid="ignore"):
-            spread = np.nanmax(D, axis=0) - np.nanmin(D, axis=0)
-        spread = np.nan_to_num(spread, nan=1e9)
+        X = _positions(positions, len(labels))
+        lo, hi = _distance_range(X)
+        spread = np.nan_to_num(hi - lo, nan=1e9)
         np.fill_diagonal(spread, 0.0)
         tree = linkage(squareform(np.maximum(spread, spread.T), checks=False), "complete")
         group = fcluster(tree, tolerance_mm, criterion="distance") - 1
-        segments = {
-            f"segment{g + 1}": [labels[m] for m in np.flatnonzero(group == g)]
-            for g in np.unique(group)
-        }
-        small = {k: v for k, v in segments.items() if len(v) < 3}
-        if small:
+        groups = [[labels[m] for m in np.flatnonzero(group == g)] for g in np.unique(group)]
+        small = [g for g in groups if len(g) < 3]
+        if small and link_spread_mm is None:
             raise ReconstructionError(
                 "markers on no rigid cluster of 3 or more: "
-                + "; ".join(", ".join(v) for v in small.values())
+                + "; ".join(", ".join(v) for v in small)
+                + " (give link_spread_mm to label them by their distance links)"
             )
-        return cls.from_trajectories(labels, X, segments)
+        index = {name: m for m, name in enumerate(labels)}
+        solid = [g for g in groups if len(g) >= 3 and _spans_a_plane(X[:, [index[x] for x in g]])]
+        if len(solid) < len(groups) - len(small) and link_spread_mm is None:
+            raise ReconstructionError(
+                "markers on a line cannot make a rigid cluster: "
+                + "; ".join(", ".join(g) for g in groups if len(g) >= 3 and g not in solid)
+                + " (give link_spread_mm to label them by their distance links)"
+            )
+        segments = {f"segment{k + 1}": g for k, g in enumerate(solid)}
+        return cls.from_trajectories(labels, X, segments, link_spread_mm=link_spread_mm)
 
     def to_json(self) -> dict[str, Any]:
         """JSON-safe description (the file layout of :meth:`save`)."""
@@ -196,6 +290,13 @@ class MarkerModel:
                     "coordinates_mm": seg.coordinates.round(4).tolist(),
                 }
                 for seg in self.segments
+            ],
+            "links": [
+                {
+                    "markers": [self.labels[k.a], self.labels[k.b]],
+                    "range_mm": [round(k.min_mm, 4), round(k.max_mm, 4)],
+                }
+                for k in self.links
             ],
         }
 
@@ -220,6 +321,46 @@ class MarkerModel:
                 )
                 for s in data["segments"]
             )
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            links = tuple(
+                Link(index[str(k["markers"][0])], index[str(k["markers"][1])],
+                     float(k["range_mm"][0]), float(k["range_mm"][1]))
+                for k in data.get("links", [])
+            )  # fmt: skip
+        except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
             raise ReconstructionError(f"{path}: not a marker model ({exc})") from None
-        return cls(labels, segments)
+        return cls(labels, segments, links)
+
+
+def _positions(positions: Any, M: int) -> FloatArray:
+    """Trajectories as float (F, M, 3), or a ReconstructionError."""
+    X = np.asarray(positions, dtype=np.float64)
+    if X.ndim != 3 or X.shape[1:] != (M, 3):
+        raise ReconstructionError(f"positions must have shape (F, {M}, 3)")
+    return X
+
+
+def _spans_a_plane(X: FloatArray, min_mm: float = 10.0) -> bool:
+    """Whether markers (F, P, 3) stand more than ``min_mm`` (RMS) off their best line in
+    their first complete frame: a rigid fit needs three non-collinear markers."""
+    complete = X[np.isfinite(X).all(axis=(1, 2))]
+    if complete.shape[0] == 0:
+        return False
+    centred = complete[0] - complete[0].mean(axis=0)
+    off_line = np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(centred.shape[0])
+    return bool(off_line > min_mm)
+
+
+def _distance_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Smallest and largest distance (M, M) of every marker pair over the frames of ``X``
+    (F, M, 3) where both are present; NaN for pairs never seen together."""
+    lo = np.full(X.shape[1:2] * 2, np.inf)
+    hi = np.full(X.shape[1:2] * 2, -np.inf)
+    for start in range(0, X.shape[0], 256):  # (256, M, M) at a time
+        D = np.linalg.norm(X[start : start + 256, :, None] - X[start : start + 256, None], axis=-1)
+        D = np.where(np.isfinite(D), D, np.nan)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pairs
+            lo = np.fmin(lo, np.nanmin(D, axis=0))
+            hi = np.fmax(hi, np.nanmax(D, axis=0))
+    never = ~np.isfinite(lo) | ~np.isfinite(hi)
+    return np.where(never, np.nan, lo), np.where(never, np.nan, hi)
