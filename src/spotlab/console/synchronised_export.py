@@ -27,6 +27,7 @@ TRC ``Time`` column).
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,17 +43,24 @@ from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import MarkerObservations
 from spotlab.console.progress import Progress
 from spotlab.console.session_times import DecodedStreams, decode_streams, read_streams
-from spotlab.console.trajectories import Reconstruction, load_rig, reconstruct
+from spotlab.console.trajectories import (
+    Reconstruction,
+    load_rig,
+    reconstruct,
+    reconstruct_file,
+)
 from spotlab.core.errors import SynchronisationError
 from spotlab.core.streams import StreamSpec
 from spotlab.geometry import Rig
 
 __all__ = [
+    "NO_TIMER_NOTE",
     "ImageStream",
     "SynchronisedObservations",
     "export_synchronised",
     "has_timer",
     "image_streams",
+    "reconstruct_recording",
     "synchronise_observations",
 ]
 
@@ -60,6 +68,11 @@ FloatArray = NDArray[np.float64]
 
 #: Stream kind whose readings are triangulated.
 IMAGE_KIND = "image2d"
+#: What stderr says when a recording without a timer is reconstructed as before.
+NO_TIMER_NOTE = (
+    "no timer stream in the recording: the one stream is reconstructed by frame number at "
+    "its nominal rate, not on session times (give --sync for host-arrival session times)"
+)
 
 
 @dataclass(frozen=True)
@@ -337,3 +350,40 @@ def export_synchronised(
     result.trial.metadata["session_start_s"] = float(obs.times[0])
     result.trial.metadata["session_reference"] = timebase.reference
     return SynchronisedExport(result, timebase, [*timebase.notes, *notes])
+
+
+def reconstruct_recording(
+    recording: Path,
+    calibration: Path,
+    *,
+    sync: bool = False,
+    wiring: Mapping[str, int] | None = None,
+    rate_hz: float | None = None,
+    slot_correction: bool = True,
+    show_progress: bool = True,
+) -> Reconstruction:
+    """``spotlab export REC.spj --calibration``: on session times when the recording holds
+    a timer stream or ``sync`` is set (:func:`export_synchronised`), else the one stream
+    by frame number at its nominal rate (:func:`reconstruct_file`); notes go to stderr.
+    """
+    decoded = decode_streams(recording)
+    if not (sync or has_timer(decoded)):
+        print(f"spotlab: note: {NO_TIMER_NOTE}", file=sys.stderr)
+        return reconstruct_file(
+            recording, calibration, rate_hz=rate_hz, show_progress=show_progress
+        )
+    done = export_synchronised(
+        recording,
+        calibration,
+        wiring=wiring,
+        rate_hz=rate_hz,
+        slot_correction=slot_correction,
+        decoded=decoded,
+        show_progress=show_progress,
+    )
+    for note in done.notes:
+        print(f"spotlab: warning: {note}", file=sys.stderr)
+    for timing in done.timebase.streams.values():
+        for note in timing.notes:
+            print(f"spotlab: {timing.name}: {note}", file=sys.stderr)
+    return done.result

@@ -4,6 +4,11 @@
 reads (a ``.spj`` recording, npz, CSV) with ``--calibration``: they are reconstructed on
 the way (:mod:`spotlab.console.trajectories`).
 
+A recording with a timer stream (or with ``--sync``) is reconstructed on session times:
+every ``image2d`` stream resampled at common instants (``--rate``), the cameras of all
+streams stacked in stream order (the calibration lists them so), see
+:mod:`spotlab.console.synchronised_export`.
+
 ``--timestamps OUT.csv`` writes the session time of every frame of every stream of a
 recording (``stream, seq, time_s, device_ticks, method``), ``--sync-report OUT.json``
 the clock report (reference, drift, jitter and events per stream); see
@@ -21,6 +26,7 @@ from typing import Any
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
 from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
+from spotlab.console.synchronised_export import reconstruct_recording
 from spotlab.console.trajectories import (
     check_outputs,
     print_summary,
@@ -63,6 +69,24 @@ def add_parser(sub: Any) -> None:
         metavar="STREAM=INPUT",
         help="timer input that captured STREAM's frame pulses (default: found from the "
         "recording); repeat",
+    )
+    p.add_argument(
+        "--sync",
+        action="store_true",
+        help="reconstruct a recording on session times even without a timer stream (host "
+        "arrival stamps; with a timer this is the default)",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        metavar="HZ",
+        help="rate of the common instants of a synchronised export (default: the fastest stream's)",
+    )
+    p.add_argument(
+        "--no-slot-correction",
+        action="store_true",
+        help="take every marker at its frame's time, not its LED slot's (diagnosis only: "
+        "biases moving markers)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
@@ -130,7 +154,13 @@ def run(args: argparse.Namespace) -> int:
     elif suffix in OBSERVATION_SUFFIXES:
         if args.calibration is None:
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")
-        result = reconstruct_file(path, args.calibration)
+        if suffix == ".spj":
+            result = reconstruct_recording(
+                path, args.calibration, sync=args.sync, wiring=parse_wiring(args.wiring),
+                rate_hz=args.rate, slot_correction=not args.no_slot_correction,
+            )  # fmt: skip
+        else:
+            result = reconstruct_file(path, args.calibration, rate_hz=args.rate)
         trial, summary = result.trial, result.summary
     else:
         known = ", ".join([*TRIAL_READERS, *OBSERVATION_SUFFIXES])
