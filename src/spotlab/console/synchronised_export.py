@@ -368,10 +368,11 @@ def reconstruct_recording(
     """
     decoded = decode_streams(recording)
     if not (sync or has_timer(decoded)):
-        print(f"spotlab: note: {NO_TIMER_NOTE}", file=sys.stderr)
-        return reconstruct_file(
+        result = reconstruct_file(
             recording, calibration, rate_hz=rate_hz, show_progress=show_progress
         )
+        print(f"spotlab: note: {NO_TIMER_NOTE}", file=sys.stderr)
+        return result
     done = export_synchronised(
         recording,
         calibration,
