@@ -138,6 +138,21 @@ class Subset(Motion):
         return self.motion.sample(times, markers)
 
 
+class Delayed(Motion):
+    """Another motion ``shift_s`` seconds later in its course: ``sample(t)`` is the
+    motion's at ``t + shift_s`` (simulators powered up at different moments see one
+    world when each shifts by its power-up time since a common scene epoch)."""
+
+    def __init__(self, motion: Motion, shift_s: float) -> None:
+        self.motion = motion
+        self.shift_s = float(shift_s)
+        self.n_markers = motion.n_markers
+        self.labels = motion.labels
+
+    def sample(self, times: F64, markers: I64) -> F64:
+        return self.motion.sample(np.asarray(times, dtype=np.float64) + self.shift_s, markers)
+
+
 class WandDance(Motion):
     """Two LEDs ``length`` mm apart on a wand waved through the volume.
 

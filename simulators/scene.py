@@ -335,6 +335,7 @@ def ring_rig(
     target: tuple[float, float, float] = (0.0, 0.0, 900.0),
     focal: float = 3500.0,
     k1: float = -0.01,
+    phase_deg: float = 0.0,
 ) -> list[PsdCamera]:
     """Cameras evenly spaced on a circle around the volume, all aimed at ``target``.
 
@@ -350,10 +351,14 @@ def ring_rig(
         Focal length, detector counts.
     k1 : float
         Radial lens distortion.
+    phase_deg : float
+        Turns the whole ring about the vertical, degrees (camera ``i`` at azimuth
+        ``45 + phase_deg + 360 i / n_cameras``): a second system of the same lab on
+        other places.
     """
     cams = []
     for i in range(n_cameras):
-        a = 2.0 * np.pi * i / n_cameras + np.pi / 4
+        a = 2.0 * np.pi * i / n_cameras + np.pi / 4 + np.deg2rad(phase_deg)
         eye = (radius * np.cos(a), radius * np.sin(a), height)
         cams.append(PsdCamera.look_at(eye, target, focal=focal, name=f"cam{i}", k1=k1))
     return cams

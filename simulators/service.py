@@ -17,7 +17,7 @@ from urllib.parse import parse_qsl, quote, urlsplit
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import FaultInjector
 from spotlab.simulators.lab import LabPublisher, PulseSource, lab_dir
-from spotlab.simulators.motions import MOTIONS, make_motion
+from spotlab.simulators.motions import MOTIONS, Delayed, make_motion
 from spotlab.simulators.scene import Ambient, Mirror, Scene, ring_rig
 from spotlab.simulators.selspot import SelspotDevice
 from spotlab.simulators.timer import TimerDevice
@@ -72,6 +72,12 @@ class SelspotSimOptions:
     rig_out : Path, optional
         Where to write the simulated cameras as a spotlab rig (TOML, detector counts;
         see :meth:`PsdModel.rig`): the truth a calibration should find.
+    ring_phase_deg : float
+        Turns the camera ring about the vertical (degrees): another system's cameras.
+    scene_epoch_s : float, optional
+        World time (``time.monotonic()`` s) at which the motion starts; None: at the
+        device's power-up. Systems of one lab given the same epoch see the same markers
+        at the same world instants.
     lab_name : str
         Name under which the frame pulses are published to the lab folder (a
         timer's ``--input N=NAME``); empty: not published.
@@ -101,6 +107,8 @@ class SelspotSimOptions:
     ambient: float = 0.0
     floor_reflectance: float = 0.05
     rig_out: Path | None = None
+    ring_phase_deg: float = 0.0
+    scene_epoch_s: float | None = None
     lab_name: str = ""
     lab: Path | None = None
 
@@ -131,14 +139,21 @@ _URL_NAMES = {
 _URL_SHORT = {v: k for k, v in _URL_NAMES.items()}
 
 
-def build_scene(options: SelspotSimOptions) -> Scene:
-    """The scene of a simulated system: ring rig, floor mirror, ambient light, motion."""
+def build_scene(options: SelspotSimOptions, epoch_ns: int | None = None) -> Scene:
+    """The scene of a simulated system: ring rig, floor mirror, ambient light, motion.
+
+    ``epoch_ns``: the device's power-up (world ns), where its scene time starts; with
+    ``options.scene_epoch_s`` the motion is shifted to start at that world time instead.
+    """
     mirrors = (
         [Mirror(reflectance=options.floor_reflectance)] if options.floor_reflectance > 0 else []
     )
+    motion = make_motion(options.motion, options.leds, options.seed)
+    if options.scene_epoch_s is not None and epoch_ns is not None:
+        motion = Delayed(motion, epoch_ns * 1e-9 - options.scene_epoch_s)
     return Scene(
-        motion=make_motion(options.motion, options.leds, options.seed),
-        cameras=ring_rig(options.cameras),
+        motion=motion,
+        cameras=ring_rig(options.cameras, phase_deg=options.ring_phase_deg),
         mirrors=mirrors,
         ambient=Ambient(level=options.ambient),
     )
@@ -156,7 +171,7 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         epoch_ns=now_ns,
     )
     faults = FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed)
-    scene = build_scene(options)
+    scene = build_scene(options, clock.epoch_ns)
     device = SelspotDevice(
         scene,
         clock,
@@ -220,7 +235,7 @@ def _options_from_url(url: str, family: str, cls: type[_O]) -> _O:
         try:
             if kind == "int":
                 values[name] = int(text)
-            elif kind == "float":
+            elif kind in ("float", "float | None"):
                 values[name] = float(text)
             elif "Path" in kind:
                 values[name] = Path(text) if text else None

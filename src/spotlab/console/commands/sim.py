@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
 from spotlab.simulators import service
+from spotlab.simulators.centroid_model import write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
 from spotlab.simulators.motions import MOTIONS
 
@@ -84,6 +85,21 @@ def add_parser(sub: Any) -> None:
         help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
     )
     p.add_argument(
+        "--ring-phase",
+        type=float,
+        default=0.0,
+        metavar="DEG",
+        help="selspot: turn the camera ring about the vertical by DEG degrees (a second "
+        "system's cameras elsewhere around the same volume)",
+    )
+    p.add_argument(
+        "--scene-epoch",
+        type=float,
+        metavar="WORLD_S",
+        help="selspot: the motion starts at this monotonic clock time (s) instead of at "
+        "power-up; systems given the same epoch see the same markers",
+    )
+    p.add_argument(
         "--lab",
         type=Path,
         metavar="DIR",
@@ -119,6 +135,11 @@ def add_parser(sub: Any) -> None:
         help="camera CAM delivers no frames from AT s after START:; repeat",
     )  # fmt: skip
     cen.add_argument("--no-occlusion", action="store_true", help="body segments hide nothing")
+    cen.add_argument(
+        "--model-out", type=Path, metavar="MODEL.json",
+        help="write the markers' model (truth labels, rigid clusters, distance links) as JSON "
+        "for spotlab record --model / spotlab reconstruct --model",
+    )  # fmt: skip
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     p.set_defaults(run=run)
 
@@ -152,6 +173,8 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         motion=motion,
         floor_reflectance=args.reflectance,
         rig_out=args.rig_out,
+        ring_phase_deg=getattr(args, "ring_phase", 0.0),
+        scene_epoch_s=getattr(args, "scene_epoch", None),
         lab_name=getattr(args, "lab_name", None) or "selspot",
         lab=getattr(args, "lab", None),
     )
@@ -221,7 +244,10 @@ def run(args: argparse.Namespace) -> int:
     if args.family == "centroid":
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
-        return _serve(args, serve_centroid_pty(centroid_options_from_args(args)))
+        options = centroid_options_from_args(args)
+        if args.model_out is not None:
+            write_body_model(args.model_out, options.markers, options.seed)
+        return _serve(args, serve_centroid_pty(options))
     if args.family == "timer":
         if args.tcp is not None:
             raise CommandError("the timer simulator serves on a pseudo-terminal only (--pty)")
