@@ -16,6 +16,13 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.console.blob_trajectories import (
+    identify_recording,
+    is_blob_recording,
+    load_model,
+    print_blob_summary,
+    read_blob_recording,
+)
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import MarkerObservations, load_observations
 from spotlab.console.progress import Progress
@@ -219,10 +226,30 @@ def reconstruct_file(
     method: str = "odle",
     rate_hz: float | None = None,
     labels: Sequence[str] | None = None,
+    model: Path | None = None,
     show_progress: bool = True,
 ) -> Reconstruction:
-    """:func:`reconstruct` from files: observations (npz, CSV, ``.spj``) and a calibration."""
+    """:func:`reconstruct` from files: observations (npz, CSV, ``.spj``) and a calibration.
+
+    A video-centroid (``blobs2d``) recording takes the blob path
+    (:mod:`spotlab.console.blob_trajectories`): its markers are identified and named by
+    the marker model ``model`` (default: the one stored in the recording).
+    """
     rig = load_rig(calibration)
+    if is_blob_recording(observations):
+        if labels:
+            raise CommandError(
+                f"{observations}: the markers of a video-centroid recording are named by "
+                "its marker model (--model), not --labels"
+            )
+        blobs = read_blob_recording(observations)
+        marker_model = load_model(model, blobs, observations)
+        shown = Progress("identifying", total=blobs.blobs.n_frames) if show_progress else None
+        found = identify_recording(rig, blobs, marker_model, rate_hz=rate_hz, progress=shown)
+        summary = {"input": str(observations), "calibration": str(calibration), **found.summary}
+        return Reconstruction(found.trial, summary, found.ticks)
+    if model is not None:
+        raise CommandError(f"{observations}: --model applies to video-centroid recordings only")
     obs = load_observations(observations)
     progress = Progress("reconstructing", total=obs.uv.shape[0]) if show_progress else None
     result = reconstruct(rig, obs, method=method, rate_hz=rate_hz, labels=labels, progress=progress)
@@ -236,6 +263,9 @@ def reconstruct_file(
 
 def print_summary(summary: dict[str, Any], outputs: Sequence[Path]) -> None:
     """The human-readable summary of a reconstruction on stdout."""
+    if summary.get("method") == "identification":
+        print_blob_summary(summary, list(outputs))
+        return
     rms = summary["rms_ray_px"]
     lost = summary.get("lost_frames")
     print(

@@ -27,7 +27,8 @@ def add_parser(sub: Any) -> None:
         help="triangulate marker trajectories from observations and a calibration",
         description="Triangulate every frame of the observations (npz, CSV or a .spj "
         "recording) with a calibrated rig and write the trajectories as C3D or TRC "
-        "(by the suffix of --out).",
+        "(by the suffix of --out). The blobs of a video-centroid recording are identified "
+        "and named by a marker model (--model, or the one stored in the recording).",
     )
     p.add_argument("input", type=Path, help="observations: OBS.npz, OBS.csv or RECORDING.spj")
     p.add_argument("--calibration", type=Path, required=True, help="rig (TOML)")
@@ -35,6 +36,13 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--method", choices=METHODS, default="odle", help="estimator (default odle)")
     p.add_argument("--rate", type=float, help="frame rate in Hz (needed for CSV input)")
     p.add_argument("--labels", nargs="+", metavar="LABEL", help="marker names, one per marker")
+    p.add_argument(
+        "--model",
+        type=Path,
+        metavar="MODEL.json",
+        help="marker model naming the markers of a video-centroid recording (default: the "
+        "one stored in the recording by spotlab record --model)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
 
@@ -47,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method,
         rate_hz=args.rate,
         labels=args.labels,
+        model=args.model,
     )
     write_trial(args.out, result.trial)
     if args.json:

@@ -11,6 +11,7 @@ from typing import Any
 import spotlab.simulators  # noqa: F401  (registers the sim:// URL scheme with pyserial)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
+from spotlab.console.blob_trajectories import MODEL_KEY, model_metadata
 from spotlab.console.errors import CommandError
 from spotlab.console.progress import Progress
 from spotlab.core.wire import LinkEventKind
@@ -44,6 +45,13 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--leds", type=int, help="LEDs (markers) to configure")
     p.add_argument("--rate", type=float, help="frame rate in Hz")
     p.add_argument("--baud", help="line rate after negotiation, or 'auto'")
+    p.add_argument(
+        "--model",
+        type=Path,
+        metavar="MODEL.json",
+        help="marker model (names, rigid clusters) of the subject, kept in the recording for "
+        "spotlab reconstruct of video-centroid recordings",
+    )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(run=run)
 
@@ -137,7 +145,10 @@ def run(args: argparse.Namespace) -> int:
     if args.out.exists() and not args.overwrite:
         raise CommandError(f"{args.out} exists; choose another --out or add --overwrite")
     drivers = build_drivers(args)
-    recorder = Recorder(args.out, {"command": "record"}, overwrite=args.overwrite)
+    session_meta: dict[str, Any] = {"command": "record"}
+    if args.model is not None:
+        session_meta[MODEL_KEY] = model_metadata(args.model)
+    recorder = Recorder(args.out, session_meta, overwrite=args.overwrite)
     progress = Progress("recording", total=args.seconds)
 
     def show(status: SessionStatus) -> None:

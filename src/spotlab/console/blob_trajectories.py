@@ -1,0 +1,423 @@
+"""A video-centroid recording + calibration + marker model -> labelled trajectories.
+
+The blob path of ``spotlab reconstruct`` and ``spotlab export`` (the SELSPOT path is
+:mod:`spotlab.console.trajectories`). A recording of one ``blobs2d`` stream (a CEN hub,
+docs/protocols/centroid.md) holds unidentified blobs per camera and frame; they are
+decoded with the stream's driver, joined into
+:class:`~spotlab.drivers.centroid.BlobFrames`, and identified frame by frame with
+:class:`~spotlab.reconstruction.identification.Identifier` (cameras the hub flagged
+offline or overflowing are left out of their frame). Markers take the names of the
+marker model: from ``--model MODEL.json`` when given, else the one ``spotlab record
+--model`` stored in the recording (session metadata key ``marker_model``).
+
+Frames are placed on the hub's frame grid by their camera frame counters (triggers
+since ``START:``, the numbering of the simulator's truth ``frame_no``): the trial starts
+at the first recorded frame (C3D ``first_frame`` = its number + 1, C3D counting from 1)
+and a frame lost on the link stays a gap (NaN) in its place. Marker positions are NaN
+where a marker was not labelled: a flagged gap, never a guess.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.acquisition.replay import replay
+from spotlab.console.decoding import decoder_for
+from spotlab.console.errors import CommandError
+from spotlab.console.progress import Progress
+from spotlab.core.errors import CalibrationError, ReconstructionError, RecordingError
+from spotlab.core.frames import FrameBlock
+from spotlab.core.wire import StreamDecoder
+from spotlab.drivers.centroid import BLOB_MERGED, BlobFrames, blobs_from_blocks
+from spotlab.geometry import Rig
+from spotlab.io import Trial
+from spotlab.io.journal import JournalReader
+from spotlab.reconstruction.identification import (
+    FLOODED,
+    NO_BLOBS,
+    BlobFrame,
+    Identifier,
+    MarkerModel,
+)
+
+__all__ = [
+    "BLOB_KIND",
+    "MODEL_KEY",
+    "BlobRecording",
+    "BlobTrajectories",
+    "identify_recording",
+    "is_blob_recording",
+    "load_model",
+    "model_metadata",
+    "print_blob_summary",
+    "read_blob_recording",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Stream kind of a video-centroid recording.
+BLOB_KIND = "blobs2d"
+#: Session metadata key under which ``spotlab record --model`` stores the marker model.
+MODEL_KEY = "marker_model"
+
+
+@dataclass
+class BlobRecording:
+    """The decoded blobs of a one-stream ``blobs2d`` recording.
+
+    Attributes
+    ----------
+    blobs : BlobFrames
+        Every decoded frame, in recording order.
+    frame_no : ndarray of int64, shape (F,)
+        Hub frame number of each decoded frame (triggers since ``START:``).
+    rate_hz : float
+        Nominal frame rate of the stream.
+    stream : str
+        Stream name.
+    model : dict or None
+        The marker model stored in the recording (JSON layout of
+        :meth:`MarkerModel.to_json`), if any.
+    """
+
+    blobs: BlobFrames
+    frame_no: NDArray[np.int64]
+    rate_hz: float
+    stream: str
+    model: dict[str, Any] | None
+
+
+@dataclass
+class BlobTrajectories:
+    """Labelled trajectories of a blob recording and what happened on the way.
+
+    Attributes
+    ----------
+    trial : Trial
+        Points (F, M, 3) mm on the hub's frame grid from the first recorded frame, NaN
+        where a marker was not labelled or the frame was lost; ``first_frame`` is the
+        first frame's hub number + 1.
+    summary : dict
+        JSON-safe figures (see :func:`identify_recording`).
+    ticks : ndarray of int64, shape (F,)
+        Hub time stamp (µs) of each frame, -1 for a lost frame.
+    """
+
+    trial: Trial
+    summary: dict[str, Any]
+    ticks: NDArray[np.int64]
+
+
+def _stream_kinds(path: Path) -> list[tuple[str, str | None]]:
+    """``(family, spec kind)`` of every stream declared in a journal."""
+    out = []
+    for meta in JournalReader(path).streams.values():
+        spec = meta.get("spec")
+        kind = spec.get("kind") if isinstance(spec, dict) else None
+        out.append((str(meta.get("family")), None if kind is None else str(kind)))
+    return out
+
+
+def is_blob_recording(path: Path) -> bool:
+    """True when ``path`` is a recording (``.spj``) whose streams are all ``blobs2d``."""
+    if path.suffix.lower() != ".spj" or not path.is_file():
+        return False
+    try:
+        kinds = _stream_kinds(path)
+    except RecordingError:
+        return False
+    return bool(kinds) and all(kind == BLOB_KIND for _, kind in kinds)
+
+
+def read_blob_recording(path: Path) -> BlobRecording:
+    """Decode every frame of a recording of one video-centroid hub.
+
+    Raises
+    ------
+    CommandError
+        For a file that is not a recording, several streams, another stream kind, no
+        frames, or camera frame counters that go backwards (a restart).
+    """
+    metas: list[dict[str, Any]] = []
+
+    def factory(metadata: dict[str, Any]) -> StreamDecoder:
+        metas.append(metadata)
+        return decoder_for(metadata)
+
+    names: set[str] = set()
+    blocks: list[FrameBlock] = []
+    try:
+        session = JournalReader(path).session
+        for name, block in replay(path, factory):
+            names.add(name)
+            blocks.append(block)
+    except RecordingError as exc:
+        raise CommandError(f"{path}: {exc}") from None
+    if len(names) > 1:
+        raise CommandError(
+            f"{path}: {len(names)} streams ({', '.join(sorted(names))}); the blob path reads "
+            "recordings of one video-centroid hub"
+        )
+    specs = [m.get("spec") or {} for m in metas]
+    if any(s.get("kind") != BLOB_KIND for s in specs):
+        raise CommandError(f"{path}: not a video-centroid ({BLOB_KIND}) recording")
+    blobs = blobs_from_blocks(blocks)
+    if blobs.n_frames == 0:
+        raise CommandError(f"{path}: the recording holds no frames")
+    rate = float(specs[-1].get("rate_hz", np.nan))
+    if not (np.isfinite(rate) and rate > 0):
+        raise CommandError(f"{path}: the recording does not state its frame rate")
+    model = session.get(MODEL_KEY)
+    return BlobRecording(
+        blobs=blobs,
+        frame_no=_frame_numbers(blobs, rate, path),
+        rate_hz=rate,
+        stream=next(iter(names)),
+        model=model if isinstance(model, dict) else None,
+    )
+
+
+def _frame_numbers(blobs: BlobFrames, rate_hz: float, path: Path) -> NDArray[np.int64]:
+    """Hub frame number of each decoded frame: the cameras' frame counter, or (where no
+    camera delivered) the hub tick on the frame grid of the neighbouring frames."""
+    counter = np.where(blobs.offline, -1, blobs.camera_frame).max(axis=1)
+    known = counter >= 0
+    if not known.any():
+        raise CommandError(f"{path}: no camera delivered a frame counter")
+    # Frames no camera delivered: the hub's tick (µs) from the nearest known frame.
+    ref = np.flatnonzero(known)
+    near = ref[np.clip(np.searchsorted(ref, np.arange(known.size)), 0, ref.size - 1)]
+    by_tick = counter[near] + np.rint(
+        (blobs.ticks - blobs.ticks[near]).astype(np.float64) * rate_hz / 1e6
+    ).astype(np.int64)
+    number = np.where(known, counter, by_tick).astype(np.int64)
+    if (np.diff(number) <= 0).any():
+        raise CommandError(
+            f"{path}: camera frame counters go backwards or repeat (a restart during the "
+            "recording?); split the recording at the restart"
+        )
+    return number
+
+
+def model_metadata(path: Path) -> dict[str, Any]:
+    """A marker model file as the JSON-safe dictionary ``spotlab record --model`` stores.
+
+    Raises
+    ------
+    CommandError
+        For a missing or malformed model file.
+    """
+    return _model_from_file(path).to_json()
+
+
+def _model_from_file(path: Path) -> MarkerModel:
+    if not path.is_file():
+        raise CommandError(f"{path}: no such marker model file")
+    try:
+        return MarkerModel.load(path)
+    except ReconstructionError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def load_model(path: Path | None, recording: BlobRecording, source: Path) -> MarkerModel:
+    """The marker model: from ``path`` when given, else the one stored in the recording.
+
+    Raises
+    ------
+    CommandError
+        When neither gives one, or the one given is malformed.
+    """
+    if path is not None:
+        return _model_from_file(path)
+    if recording.model is None:
+        raise CommandError(
+            f"{source}: no marker model to name the markers: give --model MODEL.json, or "
+            "record with spotlab record --model MODEL.json"
+        )
+    with tempfile.TemporaryDirectory() as tmp:  # MarkerModel reads its JSON from a file
+        file = Path(tmp) / "model.json"
+        file.write_text(json.dumps(recording.model))
+        try:
+            return MarkerModel.load(file)
+        except ReconstructionError as exc:
+            raise CommandError(f"{source}: its stored marker model is malformed ({exc})") from None
+
+
+def _frames(blobs: BlobFrames) -> Iterator[tuple[BlobFrame, NDArray[np.bool_]]]:
+    """Each frame's blobs (rig order) and its unusable cameras (offline, overflowing)."""
+    C = blobs.n_cameras
+    counts = blobs.counts
+    unusable = blobs.offline | blobs.overflow
+    merged = (blobs.flags & BLOB_MERGED) != 0
+    cameras = np.arange(C)
+    for f in range(blobs.n_frames):
+        lo, hi = int(blobs.offsets[f * C]), int(blobs.offsets[(f + 1) * C])
+        yield (
+            BlobFrame(blobs.uv[lo:hi], np.repeat(cameras, counts[f]), merged[lo:hi]),
+            unusable[f],
+        )
+
+
+def identify_recording(
+    rig: Rig,
+    recording: BlobRecording,
+    model: MarkerModel,
+    *,
+    rate_hz: float | None = None,
+    progress: Progress | None = None,
+) -> BlobTrajectories:
+    """Label the markers of every frame of ``recording``.
+
+    Parameters
+    ----------
+    rig : Rig
+        Calibration (mm, px) of the hub's cameras, in camera order.
+    recording : BlobRecording
+    model : MarkerModel
+        Names and rigid clusters of the markers.
+    rate_hz : float, optional
+        Frame rate; overrides the recording's.
+    progress : Progress, optional
+        Shown every few hundred frames.
+
+    Returns
+    -------
+    BlobTrajectories
+        The summary holds ``frames`` (on the grid), ``decoded_frames``,
+        ``lost_frames``, ``markers``, ``cameras``, ``rate_hz``, ``method``
+        (``identification``), ``labelled_fraction`` (marker-frames with a labelled point,
+        over the decoded frames), ``markers_reconstructed``, ``rms_ray_px``,
+        ``ghosts_rejected`` (reflection points), ``unlabelled_per_frame``,
+        ``marker_gaps`` (gaps inside each marker's trajectory, summed) and per camera the
+        frames it was ``offline``, ``overflow``, ``flooded`` (too many blobs) or had
+        ``no_blobs``.
+
+    Raises
+    ------
+    CommandError
+        When the rig's camera count differs from the recording's, or the identification
+        finds that the calibration does not match the cameras.
+    """
+    blobs = recording.blobs
+    C, F = blobs.n_cameras, blobs.n_frames
+    if len(rig) != C:
+        raise CommandError(
+            f"the recording has {C} cameras but the calibration has {len(rig)}: give the "
+            "calibration of this hub's cameras"
+        )
+    rate = float(rate_hz if rate_hz is not None else recording.rate_hz)
+    if not (np.isfinite(rate) and rate > 0):
+        raise CommandError(f"the frame rate must be a positive number of Hz, not {rate:g}")
+    try:
+        identify = Identifier(rig, model)
+    except ReconstructionError as exc:
+        raise CommandError(str(exc)) from None
+    M = len(model.labels)
+    first = int(recording.frame_no[0])
+    row = recording.frame_no - first
+    points = np.full((int(row[-1]) + 1, M, 3), np.nan)
+    residual = np.full((F, M), np.nan)
+    flagged = {"flooded": np.zeros(C, np.int64), "no_blobs": np.zeros(C, np.int64)}
+    ghosts = unlabelled = 0
+    for f, (frame, unusable) in enumerate(_frames(blobs)):
+        try:
+            result = identify(frame, unusable)
+        except CalibrationError as exc:
+            raise CommandError(f"frame {int(recording.frame_no[f])}: {exc}") from None
+        points[row[f]] = result.points
+        residual[f] = result.residual_px
+        ghosts += result.ghosts
+        unlabelled += result.unlabelled
+        flagged["flooded"] += (result.camera_flags & FLOODED) != 0
+        flagged["no_blobs"] += (result.camera_flags & NO_BLOBS) != 0
+        if progress is not None and f % 256 == 0:
+            progress.update(f, f"{f} of {F} frames")
+    if progress is not None:
+        progress.close()
+    ticks = np.full(points.shape[0], -1, dtype=np.int64)
+    ticks[row] = blobs.ticks
+    seen = np.isfinite(points[row, :, 0])
+    res = residual[np.isfinite(residual)]
+    names = [cam.name or f"cam{c + 1}" for c, cam in enumerate(rig)]
+    summary: dict[str, Any] = {
+        "frames": int(points.shape[0]),
+        "decoded_frames": F,
+        "lost_frames": int(points.shape[0] - F),
+        "first_frame_no": first,
+        "markers": M,
+        "cameras": C,
+        "rate_hz": rate,
+        "method": "identification",
+        "labelled_fraction": round(float(seen.mean()), 6),
+        "markers_reconstructed": int(seen.any(axis=0).sum()),
+        "rms_ray_px": float(np.sqrt(np.mean(res**2))) if res.size else None,
+        "ghosts_rejected": int(ghosts),
+        "unlabelled_per_frame": round(unlabelled / F, 3),
+        "marker_gaps": _gaps(np.isfinite(points[..., 0])),
+        "camera_frames": {
+            name: {
+                "offline": int(blobs.offline[:, c].sum()),
+                "overflow": int(blobs.overflow[:, c].sum()),
+                "flooded": int(flagged["flooded"][c]),
+                "no_blobs": int(flagged["no_blobs"][c]),
+            }
+            for c, name in enumerate(names)
+        },
+        "units": "mm",
+    }
+    trial = Trial(
+        points,
+        list(model.labels),
+        rate,
+        first_frame=first + 1,
+        metadata={"method": "identification", "stream": recording.stream},
+    )
+    return BlobTrajectories(trial, summary, ticks)
+
+
+def _gaps(present: NDArray[np.bool_]) -> int:
+    """Runs of missing frames inside the trajectories (F, M) (between first and last seen)."""
+    p = present.astype(np.int8)
+    starts = np.diff(p, axis=0) == -1  # seen -> missing
+    ends = np.diff(p, axis=0) == 1  # missing -> seen
+    # A gap is a fall that a later rise closes: count the rises after the first fall.
+    falls = np.cumsum(starts, axis=0) > 0
+    return int((ends & falls).sum())
+
+
+def print_blob_summary(summary: dict[str, Any], outputs: list[Path]) -> None:
+    """The human-readable summary of a blob reconstruction on stdout."""
+    rms = summary["rms_ray_px"]
+    lost = summary["lost_frames"]
+    print(
+        f"identified {summary['frames']} frames x {summary['markers']} markers at "
+        f"{summary['rate_hz']:g} Hz ({summary['cameras']} cameras)"
+        + (f", {lost} frames lost in the recording" if lost else "")
+    )
+    print(
+        f"  labelled           {100 * summary['labelled_fraction']:.2f} % of marker "
+        f"samples ({summary['markers_reconstructed']} markers seen, "
+        f"{summary['marker_gaps']} gaps)"
+    )
+    print(
+        f"  rejected           {summary['ghosts_rejected']} reflection points, "
+        f"{summary['unlabelled_per_frame']:g} unlabelled points per frame"
+    )
+    print("  RMS ray residual   " + ("-" if rms is None else f"{rms:.3f} px"))
+    for name, counts in summary["camera_frames"].items():
+        bad = {k: v for k, v in counts.items() if v}
+        if bad:
+            print(
+                f"  {name:<18} "
+                + ", ".join(f"{k.replace('_', ' ')} {v} frames" for k, v in bad.items())
+            )
+    for path in outputs:
+        print(f"  wrote              {path}")
