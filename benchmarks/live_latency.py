@@ -50,10 +50,11 @@ from spotlab.acquisition.live import LatencyStats, LiveFrame, LivePipeline
 from spotlab.acquisition.session import Session
 from spotlab.geometry import Rig
 from spotlab.simulators.rigs import ring_rig
+from spotlab.testing.image2d_source import Image2dSourceDevice
 from spotlab.testing.synthetic_image2d import SyntheticImage2d
 
 CAMERAS, MARKERS, RATE = 8, 128, 300.0
-CONFIGS = ("inline", "dispatcher", "matched")
+CONFIGS = ("inline", "inline-inproc", "dispatcher", "dispatcher-inproc", "matched")
 
 
 class ErrorMeter:
@@ -78,36 +79,109 @@ class ErrorMeter:
         self.unseen += int((~ok).sum())
 
 
-def _run(config: str, seconds: float, warmup_s: float, rig: Rig) -> dict[str, Any]:
+class CostMeter:
+    """Wraps ``pipeline.on_block``: its wall and CPU time per call (the reader's thread)."""
+
+    def __init__(self, pipeline: LivePipeline) -> None:
+        self.inner = pipeline.on_block
+        self.wall = LatencyStats()
+        self.cpu_ns = 0
+        self.calls = 0
+        pipeline.on_block = self  # type: ignore[method-assign]
+
+    def __call__(self, stream: str, block: Any) -> None:
+        w, c = time.monotonic_ns(), time.thread_time_ns()
+        self.inner(stream, block)
+        self.cpu_ns += time.thread_time_ns() - c
+        self.wall.add(time.monotonic_ns() - w)
+        self.calls += 1
+
+    def reset(self) -> None:
+        self.wall, self.cpu_ns, self.calls = LatencyStats(), 0, 0
+
+
+class GcMeter:
+    """Garbage-collector passes during the run (``gc.callbacks``): count and longest, per
+    generation."""
+
+    def __init__(self) -> None:
+        self.passes = [0, 0, 0]
+        self.max_us = [0.0, 0.0, 0.0]
+        self._t0 = 0
+
+    def __call__(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self._t0 = time.perf_counter_ns()
+            return
+        gen = info["generation"]
+        self.passes[gen] += 1
+        self.max_us[gen] = max(self.max_us[gen], (time.perf_counter_ns() - self._t0) / 1e3)
+
+
+def _devices(config: str, rig: Rig, poll_s: float | None) -> tuple[list[Any], SyntheticImage2d]:
+    """The session's devices and the one whose truth the error is measured against."""
     if config == "matched":
         t0 = time.monotonic_ns() + 200_000_000
         halves = [Rig(rig.cameras[:4]), Rig(rig.cameras[4:])]
         centre = SyntheticImage2d(rig, MARKERS, RATE).centre  # one volume for both
-        devices = [
+        pair = [
             SyntheticImage2d(
                 h, MARKERS, RATE, name=f"sys{i}", seed=i, paths_seed=0, t0_ns=t0, centre=centre
             )
             for i, h in enumerate(halves)
         ]
-    else:
-        devices = [SyntheticImage2d(rig, MARKERS, RATE, name="cams", seed=0)]
+        return list(pair), pair[0]
+    if config.endswith("-inproc"):
+        device = SyntheticImage2d(rig, MARKERS, RATE, name="cams", seed=0)
+        return [device], device
+    source = Image2dSourceDevice(rig, MARKERS, RATE, name="cams", seed=0, poll_s=poll_s)
+    return [source], source.truth_device
+
+
+def _run(
+    config: str, seconds: float, warmup_s: float, rig: Rig, poll_s: float | None, freeze: bool
+) -> dict[str, Any]:
+    devices, truth = _devices(config, rig, poll_s)
     warm = int(warmup_s * RATE)
-    meter = ErrorMeter(devices[0], warm)
-    pipeline = LivePipeline(rig, [meter], inline=config != "dispatcher")
-    load0 = os.getloadavg()[0]
+    meter = ErrorMeter(truth, warm)
+    pipeline = LivePipeline(rig, [meter], inline=not config.startswith("dispatcher"))
+    cost = CostMeter(pipeline)
     gc.collect()
     session = Session(devices, [pipeline])
-    session.start()
-    # Latency of the warm-up frames is not counted: reset once they are through.
-    time.sleep(warmup_s)
-    pipeline.reset_latency()
-    for device in devices:
-        device.behind = LatencyStats()
-    status = session.run_for(seconds)
+    gcm = GcMeter()
+    loads = [os.getloadavg()[0]]
+    try:
+        session.start()
+        # Latency of the warm-up frames is not counted: reset once they are through.
+        time.sleep(warmup_s)
+        if freeze:
+            gc.freeze()  # what exists now (modules, rig, frames) is never scanned again
+        gc.callbacks.append(gcm)
+        pipeline.reset_latency()
+        cost.reset()
+        for device in devices:
+            device.behind = LatencyStats()
+        status = session.run_for(
+            seconds,
+            lambda _: loads.append(os.getloadavg()[0]),
+            progress_interval_s=5.0,
+        )
+    finally:
+        if gcm in gc.callbacks:
+            gc.callbacks.remove(gcm)
+        session.stop()
+        for device in devices:
+            device.close()
+        if freeze:
+            gc.unfreeze()
     stats = pipeline.stats()
     lat = stats.latency
+    wall = cost.wall.summary()
     return {
         "config": config,
+        "source": "process" if isinstance(devices[0], Image2dSourceDevice) else "in-process",
+        "reader": "kernel-wait" if poll_s is None else f"poll-{poll_s * 1e6:.0f}us",
+        "gc_freeze": freeze,
         "cameras": CAMERAS,
         "markers": MARKERS,
         "rate_hz": RATE,
@@ -120,6 +194,11 @@ def _run(config: str, seconds: float, warmup_s: float, rig: Rig) -> dict[str, An
         "max_us": round(lat.max_us, 1),
         "mean_us": round(lat.mean_us, 1),
         "over_1ms": lat.over_1ms,
+        "on_block_wall_us_p50": wall.p50_us,
+        "on_block_wall_us_p99": wall.p99_us,
+        "on_block_cpu_us_mean": round(cost.cpu_ns / max(cost.calls, 1) / 1e3, 1),
+        "gc_passes": gcm.passes,
+        "gc_max_us": [round(v, 1) for v in gcm.max_us],
         "incomplete": stats.incomplete,
         "reader_behind_us_p99": max(d.behind.summary().p99_us for d in devices),
         "reader_behind_us_max": round(max(d.behind.max_ns for d in devices) / 1e3, 1),
@@ -127,7 +206,12 @@ def _run(config: str, seconds: float, warmup_s: float, rig: Rig) -> dict[str, An
         "overflows": sum(status.overflows.values()),
         "rms_error_mm": round(float(np.sqrt(meter.sq / max(meter.points, 1))), 4),
         "unseen_points": meter.unseen,
-        "loadavg_1min": [round(load0, 2), round(os.getloadavg()[0], 2)],
+        "loadavg_1min": {
+            "start": round(loads[0], 2),
+            "min": round(min(loads), 2),
+            "max": round(max(loads), 2),
+            "end": round(os.getloadavg()[0], 2),
+        },
     }
 
 
@@ -136,13 +220,23 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--warmup", type=float, default=1.0)
     parser.add_argument("--configs", nargs="+", choices=CONFIGS, default=list(CONFIGS))
+    parser.add_argument(
+        "--poll-us",
+        type=float,
+        default=None,
+        help="the out-of-process reader polls with sleeps of this many us (default: waits "
+        "in the kernel until bytes arrive)",
+    )
+    parser.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up")
     args = parser.parse_args()
+    poll_s = None if args.poll_us is None else args.poll_us / 1e6
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "rig.toml"
         ring_rig(CAMERAS).save(path)
         rig = Rig.load(path)
     for config in args.configs:
-        print(json.dumps(_run(config, args.seconds, args.warmup, rig)), flush=True)
+        result = _run(config, args.seconds, args.warmup, rig, poll_s, args.gc_freeze)
+        print(json.dumps(result), flush=True)
 
 
 if __name__ == "__main__":

@@ -140,13 +140,24 @@ class SyntheticImage2d:
         uv += self._rng.normal(0.0, self.noise_px, uv.shape)
         return np.ascontiguousarray(uv.transpose(1, 0, 2))  # (M, C, 2)
 
+    def frames(self) -> FloatArray:
+        """Image coordinates of the ``period`` frames the device repeats, px.
+
+        Returns
+        -------
+        ndarray, shape (period, M, C, 2)
+            Frame ``seq`` is row ``seq % period`` (computed on the first call).
+        """
+        if self._frames is None:
+            self._frames = np.stack([self._frame(k) for k in range(self.period)])
+        return self._frames
+
     def start(self) -> None:
         """Set frame 0's instant (unless given) and prepare it."""
         self._stop.clear()
         self.t0_ns = time.monotonic_ns() if self._t0_fixed is None else self._t0_fixed
         self._seq = 0
-        if self._frames is None:
-            self._frames = np.stack([self._frame(k) for k in range(self.period)])
+        self.frames()
         for tap in self._taps:
             tap.on_event(self.name, "started", {}, time.monotonic_ns())
 
