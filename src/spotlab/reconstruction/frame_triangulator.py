@@ -138,9 +138,13 @@ class FrameTriangulator:
             distortion has no inverse.
         """
         x, y, seen = self.normalize(uv)
-        X, ray_px, n_views = self.solve(x, y, seen)
+        everywhere = bool(seen.all())
+        X, ray_px, n_views = self._solve(x, y, seen, everywhere)
+        ray_px *= ray_px
+        if not everywhere:
+            ray_px[~seen] = 0.0
         with np.errstate(invalid="ignore", divide="ignore"):  # points seen by no camera
-            rms = np.sqrt(np.where(seen, ray_px * ray_px, 0.0).sum(axis=0) / n_views)
+            rms = np.sqrt(ray_px.sum(axis=0) / n_views)
         rms[np.isnan(X[:, 0])] = np.nan
         return X, rms, n_views
 
@@ -173,14 +177,17 @@ class FrameTriangulator:
         seen = np.isfinite(u) & np.isfinite(v)
         if self._skewed:
             x, y = _rays.normalize_seen(self._frame.lenses, arr, seen)
+        elif seen.all():  # the usual live frame: no masking
+            x, y = self._stack.normalize(u, v)
         else:
             stack = self._stack
             # Unseen observations at the principal point: finite, no Newton trouble.
             u = np.where(seen, u, stack.cx)
             v = np.where(seen, v, stack.cy)
             x, y = stack.normalize(u, v)
-            x[~seen] = 0.0
-            y[~seen] = 0.0
+            unseen = ~seen
+            x[unseen] = 0.0
+            y[unseen] = 0.0
         return x, y, seen
 
     def solve(
@@ -203,9 +210,16 @@ class FrameTriangulator:
             where unseen or where ``X`` is NaN.
         n_views : ndarray of int, shape (N,)
         """
+        return self._solve(x, y, seen, bool(seen.all()))
+
+    def _solve(
+        self, x: FloatArray, y: FloatArray, seen: NDArray[np.bool_], everywhere: bool
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+        """:meth:`solve`; ``everywhere``: every observation is seen (no masking)."""
         n_views = seen.sum(axis=0)
-        x = np.where(seen, x, 0.0)
-        y = np.where(seen, y, 0.0)
+        if not everywhere:
+            x = np.where(seen, x, 0.0)
+            y = np.where(seen, y, 0.0)
         views = _solvers.Views.build(self._frame, x, y, seen, None)
         with np.errstate(divide="ignore", invalid="ignore"):  # unseen points: masked below
             X, conditioning = _solvers.odle(views, 1, True)
@@ -216,8 +230,10 @@ class FrameTriangulator:
             ey = Xc[:, 1] / Xc[:, 2] - y
             ray_px = np.sqrt((ex * ex + ey * ey) * self._frame.f2)
         bad = (n_views < 2) | ~(conditioning >= self.min_conditioning)
-        X[bad] = np.nan
-        ray_px[:, bad] = np.nan
-        ray_px[~seen] = np.nan
+        if bad.any():
+            X[bad] = np.nan
+            ray_px[:, bad] = np.nan
+        if not everywhere:
+            ray_px[~seen] = np.nan
         X += self._origin
         return X, ray_px, n_views
