@@ -23,7 +23,13 @@ what correctly matched blobs can reconstruct):
 * ``fps``: frames identified per second of wall time in one thread (simulation and
   decoding not counted).
 
-Usage: ``python benchmarks/identification.py [--seconds 60] [--rate 300] [--seeds 0 1 2]``
+Harder variants: ``--ghost-rate 0.3`` (a reflection in 30 % of the (camera, marker)
+pairs: ghost points seen by several cameras) and ``--dropouts 0.2`` (each marker hidden
+from every camera 0.2 times a second for 10-90 frames, a hand over it: its label must
+come back after the gap).
+
+Usage: ``python benchmarks/identification.py [--seconds 60] [--rate 300] [--seeds 0 1 2]
+[--ghost-rate 0.02] [--dropouts 0]``
 """
 
 from __future__ import annotations
@@ -39,10 +45,28 @@ from spotlab.reconstruction.identification import Identifier, MarkerModel
 from spotlab.testing.centroid_scene import centroid_scene
 
 
-def run(seconds: float, rate: float, seed: int, train_s: float, tolerance: float) -> dict:
+def dropouts(shape: tuple[int, int], per_s: float, rate: float, seed: int) -> np.ndarray:
+    """(F, M) True where a marker is hidden from every camera: ``per_s`` events per marker
+    and second, each 10-90 frames long."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0xD809]))
+    F, M = shape
+    hidden = np.zeros(shape, dtype=bool)
+    n = rng.poisson(per_s * F / rate * M)
+    for f, length, m in zip(
+        rng.integers(0, F, n), rng.integers(10, 91, n), rng.integers(0, M, n), strict=True
+    ):
+        hidden[f : f + length, m] = True
+    return hidden
+
+
+def run(args: argparse.Namespace, seed: int) -> dict:
     """Simulate, identify and score one seed."""
+    seconds, rate, train_s, tolerance = args.seconds, args.rate, args.train, args.tolerance
     start = time.perf_counter()
-    scene = centroid_scene(seconds, rate, seed=seed)
+    scene = centroid_scene(seconds, rate, seed=seed, ghost_rate=args.ghost_rate)
+    if args.dropouts > 0:
+        shape = scene.markers_mm.shape[:2]
+        scene = scene.hidden(dropouts(shape, args.dropouts, rate, seed))
     generated = time.perf_counter() - start
     training = centroid_scene(train_s, rate, seed=seed + 1000)
     model = MarkerModel.infer(training.labels, training.markers_mm, link_spread_mm=50.0)
@@ -84,6 +108,8 @@ def run(seconds: float, rate: float, seed: int, train_s: float, tolerance: float
         "rate_hz": rate,
         "seconds": seconds,
         "frames": F,
+        "ghost_rate": args.ghost_rate,
+        "dropouts_per_s": args.dropouts,
         "segments": len(model.segments),
         "links": len(model.links),
         "blobs_per_frame": round(scene.blob_kind.size / F, 1),
@@ -112,9 +138,15 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--train", type=float, default=2.5, help="training trial (s)")
     parser.add_argument("--tolerance", type=float, default=10.0, help="mm")
+    parser.add_argument(
+        "--ghost-rate", type=float, default=0.02, help="(camera, marker) pairs seeing a reflection"
+    )
+    parser.add_argument(
+        "--dropouts", type=float, default=0.0, help="per marker and s: hidden from all cameras"
+    )
     args = parser.parse_args()
     for seed in args.seeds:
-        print(json.dumps(run(args.seconds, args.rate, seed, args.train, args.tolerance)))
+        print(json.dumps(run(args, seed)))
 
 
 if __name__ == "__main__":

@@ -82,6 +82,28 @@ class CentroidScene:
         """Cameras (C,) the hub flagged offline or overflowing in frame ``f``."""
         return np.asarray(self.blobs.offline[f] | self.blobs.overflow[f])
 
+    def hidden(self, hidden: NDArray[np.bool_]) -> CentroidScene:
+        """The scene with markers hidden from every camera where ``hidden`` (F, M) is True
+        (a hand over a marker): their blobs, merged ones included, are left out."""
+        b = self.blobs
+        F, C = b.n_frames, b.n_cameras
+        if hidden.shape != (F, len(self.labels)):
+            raise ValueError(f"hidden must have shape ({F}, {len(self.labels)})")
+        cell = np.searchsorted(b.offsets, np.arange(b.uv.shape[0]), side="right") - 1
+        marker = np.maximum(self.blob_marker, 0)
+        keep = (self.blob_marker < 0) | ~hidden[cell // C, marker]
+        counts = np.bincount(cell[keep], minlength=F * C)
+        blobs = BlobFrames(
+            seq=b.seq, ticks=b.ticks, arrival_ns=b.arrival_ns, camera_frame=b.camera_frame,
+            exposure_us=b.exposure_us, camera_flags=b.camera_flags, n_found=b.n_found,
+            offsets=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+            uv=b.uv[keep], area=b.area[keep], peak=b.peak[keep], flags=b.flags[keep],
+        )  # fmt: skip
+        return CentroidScene(
+            self.rig, blobs, self.labels, self.markers_mm, self.blob_marker[keep],
+            self.blob_kind[keep],
+        )  # fmt: skip
+
     def oracle_uv(self) -> FloatArray:
         """Each marker's own unmerged blob, shape (C, F, M, 2) px, NaN where it has none.
 

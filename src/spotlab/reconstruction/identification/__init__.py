@@ -1,9 +1,9 @@
 """Marker identification for passive markers: blobs of several cameras -> labelled points.
 
 Correspondence between cameras (:mod:`.correspondence`), tracking in time
-(:mod:`.tracking`), labels from a marker model (:mod:`.model`, :mod:`.labelling`), all
-driven frame by frame by :class:`Identifier`. Methods and measured figures:
-``docs/identification.md``.
+(:mod:`.tracking`), labels from a marker model of rigid clusters and distance links
+(:mod:`.model`, :mod:`.labelling`), all driven frame by frame by :class:`Identifier`.
+Methods and measured figures: ``docs/identification.md``.
 """
 
 from spotlab.reconstruction.identification.blobs import BlobFrame
@@ -16,7 +16,7 @@ from spotlab.reconstruction.identification.identifier import (
     IdentifiedFrame,
     Identifier,
 )
-from spotlab.reconstruction.identification.model import MarkerModel, Segment
+from spotlab.reconstruction.identification.model import Link, MarkerModel, Segment
 
 __all__ = [
     "FLOODED",
@@ -26,6 +26,7 @@ __all__ = [
     "Correspondence",
     "IdentifiedFrame",
     "Identifier",
+    "Link",
     "MarkerModel",
     "RigGeometry",
     "Segment",

@@ -14,13 +14,37 @@ from numpy.typing import NDArray
 from spotlab.geometry import Rig
 from spotlab.reconstruction.frame_triangulator import FrameTriangulator
 
-__all__ = ["RigGeometry"]
+__all__ = ["RigGeometry", "camera_slots"]
 
 FloatArray = NDArray[np.float64]
 
 
 def _cross_matrix(v: FloatArray) -> FloatArray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def camera_slots(camera: NDArray[np.intp], n_cameras: int) -> tuple[NDArray[np.intp], int]:
+    """Places of stacked blobs in a (C, width) table, camera by camera.
+
+    Parameters
+    ----------
+    camera : ndarray of int, shape (N,)
+    n_cameras : int
+
+    Returns
+    -------
+    slot : ndarray of int, shape (N,)
+        Blob ``i`` goes to ``[camera[i], slot[i]]`` (in the order given within a camera).
+    width : int
+        Most blobs of one camera (at least 1).
+    """
+    n = camera.size
+    counts = np.bincount(camera, minlength=n_cameras)
+    order = np.argsort(camera, kind="stable")
+    slot = np.empty(n, dtype=np.intp)
+    starts = np.cumsum(counts) - counts
+    slot[order] = np.arange(n) - np.repeat(starts, counts)
+    return slot, max(1, int(counts.max()) if n else 1)
 
 
 class RigGeometry:
@@ -83,13 +107,7 @@ class RigGeometry:
             calibrated image).
         """
         C = len(self)
-        n = uv.shape[0]
-        counts = np.bincount(camera, minlength=C)
-        width = max(1, int(counts.max()) if n else 1)
-        order = np.argsort(camera, kind="stable")
-        slot = np.empty(n, dtype=np.intp)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        slot[order] = np.arange(n) - np.repeat(starts, counts)
+        slot, width = camera_slots(camera, C)
         padded = np.full((C, width, 2), np.nan)
         padded[camera, slot] = uv
         x, y, seen = self.triangulator.normalize(padded)

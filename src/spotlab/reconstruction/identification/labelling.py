@@ -78,14 +78,17 @@ def _tree(
     """Assignments (n, P) of points to the segment's markers that keep model distances.
 
     ``fixed[p]`` is the point already labelled as marker ``p`` (or -1); a marker without
-    one may take any of ``free`` or stay missing (-1).
+    one may take any of ``free`` that keeps the distances, or stay missing (-1). Once a
+    row has two points, a marker stays missing only where no point fits it: the tree
+    keeps the largest assignments, not every subset of them (2^P rows for P markers).
     """
     model = seg.coordinates
     rows = np.zeros((1, 0), dtype=np.intp)
     for p in range(model.shape[0]):
         options = np.array([fixed[p]]) if fixed[p] >= 0 else np.concatenate([free, [-1]])
         n = rows.shape[0]
-        rows = np.hstack([np.repeat(rows, options.size, 0), np.tile(options, n)[:, None]])
+        parent = np.repeat(np.arange(n), options.size)
+        rows = np.hstack([rows[parent], np.tile(options, n)[:, None]])
         new = rows[:, p]
         ok = np.ones(rows.shape[0], dtype=bool)
         for q in range(p):
@@ -95,6 +98,9 @@ def _tree(
             d_model = float(np.linalg.norm(model[p] - model[q]))
             ok &= ~both | (np.abs(dist - d_model) <= tol_mm)
             ok &= ~both | (old != new)
+        placed = (rows[:, :p] >= 0).sum(axis=1) >= 2
+        fitted = np.bincount(parent[ok & (new >= 0)], minlength=n) > 0
+        ok &= ~((new < 0) & placed & fitted[parent])
         rows = rows[ok]
     return rows
 

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from spotlab.reconstruction.identification.geometry import RigGeometry
+from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 
 __all__ = ["Tracks", "associate"]
 
@@ -142,27 +142,34 @@ def associate(
     if K == 0 or camera.size == 0:
         return index, near
     proj = geom.project(predicted)  # (C, K, 2)
-    order = np.argsort(camera, kind="stable")
-    bounds = np.searchsorted(camera[order], np.arange(C + 1))
-    for c in range(C):
-        blobs = order[bounds[c] : bounds[c + 1]]
-        if blobs.size == 0:
-            continue
-        diff = proj[c][:, None, :] - xy[blobs][None]
-        d = np.hypot(diff[..., 0], diff[..., 1]) * geom.f[c]  # (K, B)
-        inside = d < gate_px[:, None]  # NaN (behind the camera) is never inside
-        near[blobs[inside.any(axis=0)]] = True
-        inside &= usable[blobs][None]
-        rows = np.flatnonzero(inside.any(axis=1))
-        if rows.size == 0:
-            continue
-        cols = np.flatnonzero(inside.any(axis=0))
-        sub = inside[np.ix_(rows, cols)]
-        if (sub.sum(axis=1) == 1).all() and (sub.sum(axis=0) == 1).all():
-            index[c, rows] = blobs[cols[np.argmax(sub, axis=1)]]
-            continue
-        cost = np.where(sub, d[np.ix_(rows, cols)], 1e6)
+    slot, width = camera_slots(camera, C)
+    table = np.full((C, width, 2), np.nan)  # blobs camera by camera, NaN padded
+    table[camera, slot] = xy
+    blob = np.full((C, width), -1, dtype=np.intp)
+    blob[camera, slot] = np.arange(camera.size)
+    diff = proj[:, :, None, :] - table[:, None, :, :]  # (C, K, W, 2)
+    d = np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2) * geom.f[:, None, None]
+    with np.errstate(invalid="ignore"):
+        inside = d < gate_px[None, :, None]  # NaN (padding, behind a camera) never inside
+    hit = inside.any(axis=1)  # (C, W)
+    near[blob[hit]] = True
+    free = np.zeros((C, width), dtype=bool)
+    free[camera, slot] = usable
+    inside &= free[:, None, :]
+    per_track = inside.sum(axis=2)  # (C, K)
+    per_blob = inside.sum(axis=1)  # (C, W)
+    # one blob for one track and that blob for no other: taken as it is
+    single = (per_track == 1) & (per_blob[np.arange(C)[:, None], np.argmax(inside, axis=2)] == 1)
+    c_s, k_s = np.nonzero(single)
+    index[c_s, k_s] = blob[c_s, np.argmax(inside[c_s, k_s], axis=1)]
+    # the rest, where tracks compete for blobs: Hungarian per camera
+    contested = (per_track > 0) & ~single
+    for c in np.flatnonzero(contested.any(axis=1)):
+        rows = np.flatnonzero(contested[c])
+        cols = np.flatnonzero(inside[c, rows].any(axis=0))
+        sub = inside[c][np.ix_(rows, cols)]
+        cost = np.where(sub, d[c][np.ix_(rows, cols)], 1e6)
         r, k = linear_sum_assignment(cost)
         ok = sub[r, k]
-        index[c, rows[r[ok]]] = blobs[cols[k[ok]]]
+        index[c, rows[r[ok]]] = blob[c, cols[k[ok]]]
     return index, near

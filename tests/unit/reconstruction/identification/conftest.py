@@ -1,4 +1,4 @@
-"""A short scene shared by the identification tests (built once per session)."""
+"""Short scenes of the simulated CEN hub shared by the identification tests (built once)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification import MarkerModel
 from spotlab.simulators.rigs import ring_rig
-from spotlab.testing.synthetic_blobs import SyntheticBlobs, synthetic_blobs
+from spotlab.testing.centroid_scene import CentroidScene, centroid_scene
 
 
 @pytest.fixture(scope="session")
@@ -16,10 +16,13 @@ def rig() -> Rig:
 
 
 @pytest.fixture(scope="session")
-def scene(rig: Rig) -> SyntheticBlobs:
-    return synthetic_blobs(rig, 1.0, 300.0, seed=3, full_occlusion_per_s=0.5)
+def scene() -> CentroidScene:
+    """1 s of the walking body, with many reflections (ghost points below the floor)."""
+    return centroid_scene(1.0, 300.0, seed=3, ghost_rate=0.3, noise_blobs=0.5)
 
 
 @pytest.fixture(scope="session")
-def model(scene: SyntheticBlobs) -> MarkerModel:
-    return MarkerModel.from_trajectories(scene.labels, scene.markers_mm[:10], scene.segments)
+def model() -> MarkerModel:
+    """Clusters and links learnt from another run's truth (a range-of-motion trial)."""
+    training = centroid_scene(1.5, 100.0, seed=4)
+    return MarkerModel.infer(training.labels, training.markers_mm, link_spread_mm=50.0)

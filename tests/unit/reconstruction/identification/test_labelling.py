@@ -1,4 +1,4 @@
-"""Marker model and labels by cluster fit."""
+"""Marker model (rigid clusters, distance links) and labels by cluster fit and links."""
 
 from __future__ import annotations
 
@@ -8,33 +8,59 @@ import numpy as np
 import pytest
 
 from spotlab.core.errors import ReconstructionError
-from spotlab.reconstruction.identification import MarkerModel
+from spotlab.reconstruction.identification import Link, MarkerModel
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
-from spotlab.testing.synthetic_blobs import SyntheticBlobs
+from spotlab.testing.centroid_scene import CentroidScene
+
+TRUNK = {"HEAD", "C7", "LSHO", "LASI", "RASI", "SACR", "LPSI", "RPSI", "LFHD", "RFHD"}
 
 
-def test_infer_finds_the_rigid_segments(scene: SyntheticBlobs) -> None:
-    model = MarkerModel.infer(scene.labels, scene.markers_mm[::10])
-    found = {frozenset(model.labels[m] for m in seg.markers) for seg in model.segments}
-    assert found == {frozenset(v) for v in scene.segments.values()}
+def test_infer_finds_the_rigid_trunk_and_links_the_rest(model: MarkerModel) -> None:
+    segments = [{model.labels[m] for m in seg.markers} for seg in model.segments]
+    assert any(TRUNK <= seg for seg in segments)  # pelvis, trunk and head move as one
+    on_segment = {name for seg in segments for name in seg}
+    assert "LKNE" not in on_segment and "LTHI" not in on_segment  # they move apart
+    links = np.zeros(len(model.labels), int)
+    for link in model.links:
+        links[[link.a, link.b]] += 1
+        assert 0 <= link.min_mm <= link.max_mm < link.min_mm + 50.0
+    loose = [m for m, name in enumerate(model.labels) if name not in on_segment]
+    assert (links[loose] >= 3).all()
 
 
 def test_model_json_round_trip(model: MarkerModel, tmp_path: Path) -> None:
     model.save(tmp_path / "m.json")
     back = MarkerModel.load(tmp_path / "m.json")
     assert back.labels == model.labels
-    np.testing.assert_allclose(back.pairs()[2], model.pairs()[2], atol=1e-3)
+    assert len(back.links) == len(model.links)
+    for a, b in zip(back.intervals, model.intervals, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-3)
 
 
-def test_a_two_marker_group_is_refused() -> None:
-    t = np.linspace(0, 1, 20)
+def test_a_loose_marker_without_links_is_refused() -> None:
     X = np.zeros((20, 2, 3))
-    X[:, 1, 0] = 100.0 + 0 * t
+    X[:, 1, 0] = 100.0
     with pytest.raises(ReconstructionError, match="no rigid cluster of 3"):
         MarkerModel.infer(["A", "B"], X)
+    with pytest.raises(ReconstructionError, match="fewer than 3 distance links: A, B"):
+        MarkerModel.infer(["A", "B"], X, link_spread_mm=50.0)
 
 
-def test_labels_from_shape_by_the_smallest_rms(model: MarkerModel, scene: SyntheticBlobs) -> None:
+def test_markers_on_a_line_make_no_segment() -> None:
+    X = np.zeros((5, 4, 3))
+    X[:, :, 0] = [0.0, 100.0, 250.0, 400.0]  # rigid, but on a line
+    with pytest.raises(ReconstructionError, match="on a line"):
+        MarkerModel.infer(list("ABCD"), X)
+    model = MarkerModel.infer(list("ABCD"), X, link_spread_mm=50.0)
+    assert model.segments == () and len(model.links) == 6
+
+
+def test_a_bad_link_is_refused() -> None:
+    with pytest.raises(ReconstructionError, match="min_mm <= max_mm"):
+        MarkerModel(("A", "B"), (), (Link(0, 1, 50.0, 40.0),))
+
+
+def test_cold_start_labels_all_markers_none_wrong(model: MarkerModel, scene: CentroidScene) -> None:
     truth = scene.markers_mm[100]
     rng = np.random.default_rng(0)
     order = rng.permutation(40)
@@ -42,24 +68,38 @@ def test_labels_from_shape_by_the_smallest_rms(model: MarkerModel, scene: Synthe
     labels = assign_labels(
         model, points, np.full(40, -1, np.intp), tol_mm=5.0, rms_mm=3.0, margin_mm=1.0
     )
-    assert (labels == order).mean() >= 0.95  # cold start: nearly all, none wrong
+    assert (labels == order).mean() >= 0.9  # segments first, then links
     assert np.all((labels == order) | (labels == -1))
 
 
-def test_missing_marker_relabelled_from_its_cluster(
-    model: MarkerModel, scene: SyntheticBlobs
+def test_a_lost_loose_marker_is_found_by_its_links(
+    model: MarkerModel, scene: CentroidScene
 ) -> None:
     truth = scene.markers_mm[50]
+    m = model.labels.index("LTHI")
     labels = np.arange(40, dtype=np.intp)
-    labels[3] = -1  # RPSI lost, its point back as unlabelled
-    extra = np.vstack([truth, truth[3] + [0, 0, 40.0]])  # and a decoy 40 mm off
+    labels[m] = -1  # LTHI lost, its point back as unlabelled
+    points = np.vstack([truth, truth[m] + [0, 0, 60.0]])  # and a decoy 60 mm above
     labels = np.append(labels, -1)
-    out = assign_labels(model, extra, labels, tol_mm=5.0, rms_mm=3.0, margin_mm=1.0)
-    assert out[3] == 3 and out[40] == -1
+    out = assign_labels(model, points, labels, tol_mm=5.0, rms_mm=3.0, margin_mm=1.0)
+    assert out[m] == m and out[40] == -1
 
 
-def test_swapped_labels_are_dropped(model: MarkerModel, scene: SyntheticBlobs) -> None:
+def test_two_candidates_leave_the_marker_unlabelled(
+    model: MarkerModel, scene: CentroidScene
+) -> None:
+    truth = scene.markers_mm[50]
+    m = model.labels.index("LTHI")
+    labels = np.append(np.arange(40, dtype=np.intp), -1)
+    labels[m] = -1
+    points = np.vstack([truth, truth[m] + [0, 0, 2.0]])  # a twin 2 mm away: ambiguous
+    out = assign_labels(model, points, labels, tol_mm=5.0, rms_mm=3.0, margin_mm=1.0)
+    assert out[m] == -1 and out[40] == -1
+
+
+def test_swapped_labels_are_dropped(model: MarkerModel, scene: CentroidScene) -> None:
     points = scene.markers_mm[20].copy()
-    points[[0, 4]] = points[[4, 0]]  # LASI (pelvis) and C7 (trunk) swapped
+    a, b = model.labels.index("LASI"), model.labels.index("LKNE")
+    points[[a, b]] = points[[b, a]]  # a trunk marker and a loose one swapped
     drop = inconsistent_labels(model, points, np.full(40, 100, np.intp), 5.0)
-    assert drop[0] and drop[4] and drop.sum() == 2
+    assert drop[a] and drop[b] and drop.sum() == 2
