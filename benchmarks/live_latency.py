@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from spotlab.acquisition.live import LatencyStats, LiveFrame, LivePipeline
+from spotlab.acquisition.live import LatencyStats, LiveFrame, LivePipeline, PointRecorder
 from spotlab.acquisition.session import Session
 from spotlab.geometry import Rig
 from spotlab.simulators.rigs import ring_rig
@@ -139,12 +139,19 @@ def _devices(config: str, rig: Rig, poll_s: float | None) -> tuple[list[Any], Sy
 
 
 def _run(
-    config: str, seconds: float, warmup_s: float, rig: Rig, poll_s: float | None, freeze: bool
+    config: str,
+    seconds: float,
+    warmup_s: float,
+    rig: Rig,
+    poll_s: float | None,
+    freeze: bool,
+    keep: bool,
 ) -> dict[str, Any]:
     devices, truth = _devices(config, rig, poll_s)
     warm = int(warmup_s * RATE)
     meter = ErrorMeter(truth, warm)
-    pipeline = LivePipeline(rig, [meter], inline=not config.startswith("dispatcher"))
+    consumers: list[Any] = [meter, PointRecorder()] if keep else [meter]
+    pipeline = LivePipeline(rig, consumers, inline=not config.startswith("dispatcher"))
     cost = CostMeter(pipeline)
     gc.collect()
     session = Session(devices, [pipeline])
@@ -182,6 +189,7 @@ def _run(
         "source": "process" if isinstance(devices[0], Image2dSourceDevice) else "in-process",
         "reader": "kernel-wait" if poll_s is None else f"poll-{poll_s * 1e6:.0f}us",
         "gc_freeze": freeze,
+        "keep_points": keep,
         "cameras": CAMERAS,
         "markers": MARKERS,
         "rate_hz": RATE,
@@ -228,6 +236,11 @@ def main() -> None:
         "in the kernel until bytes arrive)",
     )
     parser.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up")
+    parser.add_argument(
+        "--keep-points",
+        action="store_true",
+        help="a PointRecorder consumer too (keeps every frame: the garbage collector runs)",
+    )
     args = parser.parse_args()
     poll_s = None if args.poll_us is None else args.poll_us / 1e6
     with tempfile.TemporaryDirectory() as tmp:
@@ -235,7 +248,9 @@ def main() -> None:
         ring_rig(CAMERAS).save(path)
         rig = Rig.load(path)
     for config in args.configs:
-        result = _run(config, args.seconds, args.warmup, rig, poll_s, args.gc_freeze)
+        result = _run(
+            config, args.seconds, args.warmup, rig, poll_s, args.gc_freeze, args.keep_points
+        )
         print(json.dumps(result), flush=True)
 
 
