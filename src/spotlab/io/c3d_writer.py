@@ -97,6 +97,17 @@ def _writer_class(c3d: Any) -> Any:
             handle.write(memoryview(self._frames.data))
             self._pad_block(handle)
 
+        @property
+        def first_frame(self) -> int:
+            # c3d 0.6 decodes ACTUAL_START_FIELD's two 16-bit words as lo + hi * 65535
+            # (and writes that back): a first frame past 65535 came out one lower per
+            # 65536. The words are the low and high halves of a 32-bit number.
+            param = self.get("TRIAL:ACTUAL_START_FIELD")
+            if param is not None:
+                words = param.uint16_array
+                return int(words[0]) + int(words[1]) * 65536
+            return int(self.header.first_frame)
+
     return _Writer
 
 

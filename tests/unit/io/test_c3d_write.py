@@ -222,3 +222,11 @@ def test_without_the_c3d_package(monkeypatch: pytest.MonkeyPatch, tmp_path: Path
         read_c3d(tmp_path / "any.c3d")
     with pytest.raises(FileFormatError, match=r"pip install 'spotlab\[c3d\]'"):
         write_c3d(tmp_path / "any.c3d", _trial())
+
+
+@pytest.mark.parametrize("first", [65535, 65536, 70001, 200_000])
+def test_first_frame_past_the_16_bit_header_survives(tmp_path: Path, first: int) -> None:
+    # a trial on a session time grid starts late: 300 Hz x 220 s is past 65535
+    trial = Trial(np.zeros((3, 1, 3)), ["a"], 300.0, first_frame=first)
+    write_c3d(tmp_path / "late.c3d", trial)
+    assert read_c3d(tmp_path / "late.c3d").first_frame == first
