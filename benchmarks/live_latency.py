@@ -146,6 +146,7 @@ def _run(
     poll_s: float | None,
     freeze: bool,
     keep: bool,
+    rt_priority: int,
 ) -> dict[str, Any]:
     devices, truth = _devices(config, rig, poll_s)
     warm = int(warmup_s * RATE)
@@ -158,6 +159,14 @@ def _run(
     gcm = GcMeter()
     loads = [os.getloadavg()[0]]
     try:
+        if rt_priority:
+            # Threads inherit the policy when created: the session's readers and
+            # dispatchers get it, the source process does not (reset on fork). The main
+            # thread keeps it too: a normal thread holding the interpreter lock while
+            # other programs preempt it would stall the readers (priority inversion).
+            os.sched_setscheduler(
+                0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(rt_priority)
+            )
         session.start()
         # Latency of the warm-up frames is not counted: reset once they are through.
         time.sleep(warmup_s)
@@ -181,6 +190,8 @@ def _run(
             device.close()
         if freeze:
             gc.unfreeze()
+        if rt_priority:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     stats = pipeline.stats()
     lat = stats.latency
     wall = cost.wall.summary()
@@ -189,6 +200,7 @@ def _run(
         "source": "process" if isinstance(devices[0], Image2dSourceDevice) else "in-process",
         "reader": "kernel-wait" if poll_s is None else f"poll-{poll_s * 1e6:.0f}us",
         "gc_freeze": freeze,
+        "rt_priority": rt_priority,
         "keep_points": keep,
         "cameras": CAMERAS,
         "markers": MARKERS,
@@ -208,6 +220,7 @@ def _run(
         "gc_passes": gcm.passes,
         "gc_max_us": [round(v, 1) for v in gcm.max_us],
         "incomplete": stats.incomplete,
+        "reader_behind_us_p50": max(d.behind.summary().p50_us for d in devices),
         "reader_behind_us_p99": max(d.behind.summary().p99_us for d in devices),
         "reader_behind_us_max": round(max(d.behind.max_ns for d in devices) / 1e3, 1),
         "failed": stats.failed,
@@ -237,6 +250,13 @@ def main() -> None:
     )
     parser.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after warm-up")
     parser.add_argument(
+        "--rt-priority",
+        type=int,
+        default=0,
+        help="run the session's threads under SCHED_FIFO at this priority (1-99; needs "
+        "the right to, for example root or CAP_SYS_NICE); 0: normal scheduling",
+    )
+    parser.add_argument(
         "--keep-points",
         action="store_true",
         help="a PointRecorder consumer too (keeps every frame: the garbage collector runs)",
@@ -249,7 +269,14 @@ def main() -> None:
         rig = Rig.load(path)
     for config in args.configs:
         result = _run(
-            config, args.seconds, args.warmup, rig, poll_s, args.gc_freeze, args.keep_points
+            config,
+            args.seconds,
+            args.warmup,
+            rig,
+            poll_s,
+            args.gc_freeze,
+            args.keep_points,
+            args.rt_priority,
         )
         print(json.dumps(result), flush=True)
 
