@@ -67,6 +67,8 @@ FloatArray = NDArray[np.float64]
 BLOB_KIND = "blobs2d"
 #: Session metadata key under which ``spotlab record --model`` stores the marker model.
 MODEL_KEY = "marker_model"
+#: Lost frames (in a row) the identification goes on over; after more it starts afresh.
+MAX_LOST_FRAMES = 1
 
 
 @dataclass
@@ -186,25 +188,39 @@ def read_blob_recording(path: Path) -> BlobRecording:
 
 
 def _frame_numbers(blobs: BlobFrames, rate_hz: float, path: Path) -> NDArray[np.int64]:
-    """Hub frame number of each decoded frame: the cameras' frame counter, or (where no
-    camera delivered) the hub tick on the frame grid of the neighbouring frames."""
+    """Place of each decoded frame on the hub's frame grid.
+
+    Within a stretch of streaming the cameras' frame counter (triggers since ``START:``)
+    numbers the frames; where no camera delivered one, the hub tick (µs) from the
+    nearest counted frame does. When the counter starts again (the driver restarted the
+    stream after a link outage) the new stretch is placed after the previous one by the
+    hub's tick, which runs on.
+
+    Raises
+    ------
+    CommandError
+        When no camera delivered a counter, or the hub's tick went backwards too (the hub
+        itself restarted).
+    """
     counter = np.where(blobs.offline, -1, blobs.camera_frame).max(axis=1)
     known = counter >= 0
     if not known.any():
         raise CommandError(f"{path}: no camera delivered a frame counter")
-    # Frames no camera delivered: the hub's tick (µs) from the nearest known frame.
     ref = np.flatnonzero(known)
     near = ref[np.clip(np.searchsorted(ref, np.arange(known.size)), 0, ref.size - 1)]
-    by_tick = counter[near] + np.rint(
-        (blobs.ticks - blobs.ticks[near]).astype(np.float64) * rate_hz / 1e6
-    ).astype(np.int64)
-    number = np.where(known, counter, by_tick).astype(np.int64)
-    if (np.diff(number) <= 0).any():
-        raise CommandError(
-            f"{path}: camera frame counters go backwards or repeat (a restart during the "
-            "recording?); split the recording at the restart"
-        )
-    return number
+    per_tick = rate_hz / 1e6  # frames per hub tick (µs)
+    elapsed = np.rint((blobs.ticks - blobs.ticks[near]).astype(np.float64) * per_tick)
+    number = np.where(known, counter, counter[near] + elapsed.astype(np.int64))
+    restart = np.flatnonzero(np.diff(number) <= 0) + 1
+    for k in restart:  # each restart: shift the rest after frame k - 1 by the tick
+        step = round(float(blobs.ticks[k] - blobs.ticks[k - 1]) * per_tick)
+        if step <= 0:
+            raise CommandError(
+                f"{path}: the hub's clock went backwards at frame {k} (the hub restarted "
+                "during the recording); split the recording at the restart"
+            )
+        number[k:] += number[k - 1] + step - number[k]
+    return number.astype(np.int64)
 
 
 def model_metadata(path: Path) -> dict[str, Any]:
@@ -296,7 +312,9 @@ def identify_recording(
         (``identification``), ``labelled_fraction`` (marker-frames with a labelled point,
         over the decoded frames), ``markers_reconstructed``, ``rms_ray_px``,
         ``ghosts_rejected`` (reflection points), ``unlabelled_per_frame``,
-        ``marker_gaps`` (gaps inside each marker's trajectory, summed) and per camera the
+        ``marker_gaps`` (gaps inside each marker's trajectory, summed),
+        ``identification_restarts`` (gaps of more than ``MAX_LOST_FRAMES`` lost frames,
+        after which identification starts afresh) and per camera the
         frames it was ``offline``, ``overflow``, ``flooded`` (too many blobs) or had
         ``no_blobs``.
 
@@ -326,8 +344,19 @@ def identify_recording(
     points = np.full((int(row[-1]) + 1, M, 3), np.nan)
     residual = np.full((F, M), np.nan)
     flagged = {"flooded": np.zeros(C, np.int64), "no_blobs": np.zeros(C, np.int64)}
-    ghosts = unlabelled = 0
+    ghosts = unlabelled = restarts = 0
+    last = int(row[0]) - 1  # grid row of the last frame identified
+    counts = blobs.counts
     for f, (frame, unusable) in enumerate(_frames(blobs)):
+        if not counts[f][~unusable].any():
+            continue  # no usable blob: a gap, like a lost frame
+        if int(row[f]) - last - 1 > MAX_LOST_FRAMES and last >= int(row[0]):
+            # The identifier takes its frames as consecutive: after more lost frames than
+            # its prediction bears, it starts afresh and labels are earned again from the
+            # clusters (a gap, never a label carried over a guess).
+            identify = Identifier(rig, model)
+            restarts += 1
+        last = int(row[f])
         try:
             result = identify(frame, unusable)
         except CalibrationError as exc:
@@ -362,6 +391,7 @@ def identify_recording(
         "ghosts_rejected": int(ghosts),
         "unlabelled_per_frame": round(unlabelled / F, 3),
         "marker_gaps": _gaps(np.isfinite(points[..., 0])),
+        "identification_restarts": restarts,
         "camera_frames": {
             name: {
                 "offline": int(blobs.offline[:, c].sum()),
@@ -411,6 +441,11 @@ def print_blob_summary(summary: dict[str, Any], outputs: list[Path]) -> None:
         f"  rejected           {summary['ghosts_rejected']} reflection points, "
         f"{summary['unlabelled_per_frame']:g} unlabelled points per frame"
     )
+    if summary["identification_restarts"]:
+        print(
+            f"  started afresh     {summary['identification_restarts']} times, after gaps "
+            f"of more than {MAX_LOST_FRAMES} lost frame"
+        )
     print("  RMS ray residual   " + ("-" if rms is None else f"{rms:.3f} px"))
     for name, counts in summary["camera_frames"].items():
         bad = {k: v for k, v in counts.items() if v}
