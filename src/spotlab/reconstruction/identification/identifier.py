@@ -96,7 +96,7 @@ class Identifier:
         Frames a track is carried through without measurement before it is deleted.
     keep_label_frames : int
         A track found again after at most this many missed frames keeps its label;
-        after a longer gap the label is given again by the cluster fit.
+        after a longer gap the label is given again by the cluster fit or the links.
     tol_mm, rms_mm, margin_mm : float
         Cluster checks: tolerance of model distances, largest RMS of an accepted
         identity, smallest lead over the runner-up (see :func:`.assign_labels`).
@@ -145,10 +145,6 @@ class Identifier:
         C, S = len(rig), len(model.segments)
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
-        M = len(model.labels)
-        i, j, _, _ = model.intervals
-        self._linked = np.zeros((M, M), dtype=bool)  # segment mates or links
-        self._linked[i, j] = self._linked[j, i] = True
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -198,15 +194,16 @@ class Identifier:
         long_gap = tracks.missed >= self.keep_label_frames
         tracks.update(X, _rms(ray), kept.sum(axis=0))
         # After more than a short gap a track may have caught another marker's blobs:
-        # it keeps its label only where two labelled partners can check it
-        # (inconsistent_labels), else the label is earned again from the cluster.
-        back = np.flatnonzero(long_gap & (tracks.missed == 0) & (tracks.label >= 0))
-        if back.size:
-            mates = tracks.label[(tracks.label >= 0) & (tracks.missed == 0) & ~long_gap]
-            present = self._linked[np.ix_(tracks.label[back], mates)].sum(axis=1)
-            lone = back[present < 2]
-            tracks.label[lone] = -1
-            tracks.age[lone] = 0
+        # its label is earned again, from the cluster fit or the links (checks of the
+        # track by far partners with wide link ranges would let a wrong one pass).
+        back = long_gap & (tracks.missed == 0) & (tracks.label >= 0)
+        if self.floor_mm is not None:
+            # A marker on the floor and its reflection are a few mm apart and their
+            # tracks may trade blobs: whether a track is a reflection is where it is now.
+            tracks.ghost = tracks.position[:, 2] < self.floor_mm
+            back |= tracks.ghost & (tracks.label >= 0)
+        tracks.label[back] = -1
+        tracks.age[back] = 0
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
         self._check_calibration(camera, usable, used)
         tracks.keep(tracks.missed <= self.bridge_frames)
