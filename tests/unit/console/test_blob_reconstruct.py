@@ -234,3 +234,32 @@ def test_the_simulator_model_names_the_truth_labels(folder: Path) -> None:
     assert list(model.labels) == [str(x) for x in truth["labels"]]
     assert len(model.segments) >= 1
     assert model.to_json() == body_marker_model(40, 1).to_json()
+
+
+def test_a_camera_dropping_out_and_a_sunlit_camera_are_flagged_not_mislabelled(
+    folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    options = CentroidSimOptions(
+        cameras=8, rate_hz=RATE_HZ, seed=1, truth=tmp_path / "t.npz",
+        camera_off="3@0.2:0.3", sunlight="5@0.3:0.2",
+    )  # fmt: skip
+    driver = CentroidDriver(centroid_url_for(options), cameras=8, rate_hz=RATE_HZ)
+    meta = {MODEL_KEY: MarkerModel.load(folder / "model.json").to_json()}
+    with Session([driver], [Recorder(tmp_path / "r.spj", meta)], close_devices=True) as s:
+        s.run_for(0.8)
+    out = tmp_path / "r.c3d"
+    args = ["reconstruct", str(tmp_path / "r.spj"), "--calibration", str(folder / "rig.toml")]
+    assert main([*args, "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    cameras = summary["camera_frames"]
+    assert cameras["cam4"]["offline"] >= 20 and cameras["cam1"]["offline"] == 0
+    assert cameras["cam6"]["overflow"] >= 10 and cameras["cam1"]["overflow"] == 0
+    trial = read_c3d(out)
+    truth = np.load(tmp_path / "t.npz")
+    err = np.linalg.norm(
+        trial.points - _truth_at(trial.first_frame, trial.n_frames, truth), axis=-1
+    )
+    reported = np.isfinite(err)
+    # Measured: 96.0 % labelled, 3186 of 3188 within 5 mm (2 wrong, > 20 mm).
+    assert reported.mean() > 0.8
+    assert (err[reported] < 5.0).mean() >= 0.99
