@@ -18,9 +18,9 @@ from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
 from spotlab.console.blob_trajectories import (
     MODEL_KEY,
+    BlobRecording,
     _frame_numbers,
     identify_recording,
-    read_blob_recording,
 )
 from spotlab.console.cli import main
 from spotlab.console.errors import CommandError
@@ -31,6 +31,7 @@ from spotlab.io.journal import JournalReader
 from spotlab.reconstruction.identification import MarkerModel
 from spotlab.simulators.centroid_model import body_marker_model, write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
+from spotlab.testing.centroid_scene import centroid_scene
 
 RATE_HZ, SECONDS = 100, 1.0
 
@@ -197,35 +198,33 @@ def test_labels_option_is_refused_for_blobs(
 
 
 def test_a_restarted_stream_goes_on_after_a_gap_on_the_hubs_clock(folder: Path) -> None:
-    rec = read_blob_recording(folder / "walk.spj")
-    rig = Rig.load(folder / "rig.toml")
+    # The hub's frames decoded in process (no pacing: every frame, the same each run).
+    scene = centroid_scene(1.0, RATE_HZ, seed=1, cameras=8)
     model = MarkerModel.load(folder / "model.json")
-    b, k = rec.blobs, 50
+    b, k, path = scene.blobs, 50, folder / "scene.spj"
+    rec = BlobRecording(b, _frame_numbers(b, RATE_HZ, path), RATE_HZ, "centroid", None)
+    np.testing.assert_array_equal(rec.frame_no, rec.frame_no[0] + np.arange(b.n_frames))
     # The driver restarted the stream after frame k - 1: counters start again from 0,
     # and the hub's clock shows 40 frame periods (0.4 s) more than the recording had.
     shift = np.zeros(b.n_frames, np.int64)
     shift[k:] = 40 * 10_000
     frames = b.camera_frame.copy()
     frames[k:] -= frames[k]
-    restarted = dataclasses.replace(
-        rec, blobs=dataclasses.replace(b, camera_frame=frames, ticks=b.ticks + shift)
-    )
-    number = _frame_numbers(restarted.blobs, rec.rate_hz, folder / "walk.spj")
-    np.testing.assert_array_equal(
-        number[k:] - number[k - 1], rec.frame_no[k:] - rec.frame_no[k - 1] + 40
-    )
-    restarted.frame_no = number
-    done = identify_recording(rig, restarted, model)
-    assert done.summary["lost_frames"] == 40 + rec.frame_no[-1] - rec.frame_no[0] + 1 - b.n_frames
-    before = identify_recording(rig, rec, model).summary["identification_restarts"]
-    assert done.summary["identification_restarts"] == before + 1
-    # Labels are earned again after the gap.
-    after = done.trial.points[number[-20] - number[0] :]
-    assert np.isfinite(after[..., 0]).mean() > 0.9
+    blobs = dataclasses.replace(b, camera_frame=frames, ticks=b.ticks + shift)
+    number = _frame_numbers(blobs, RATE_HZ, path)
+    np.testing.assert_array_equal(number[k:] - number[k - 1], np.arange(b.n_frames - k) + 41)
+    done = identify_recording(scene.rig, BlobRecording(blobs, number, RATE_HZ, "c", None), model)
+    assert done.summary["lost_frames"] == 40 and done.trial.n_frames == b.n_frames + 40
+    assert done.summary["identification_restarts"] == 1
+    assert np.isnan(done.trial.points[k : k + 40]).all()
+    # Labels are earned again after the gap, at the true positions.
+    after = done.trial.points[-20:]
+    err = np.linalg.norm(after - scene.markers_mm[-20:], axis=-1)
+    assert np.isfinite(err).mean() > 0.9 and np.nanmax(err) < 5.0
     # A hub whose clock went back (it restarted itself) cannot be placed.
     back = dataclasses.replace(b, camera_frame=frames, ticks=b.ticks - shift)
     with pytest.raises(CommandError, match="clock went backwards"):
-        _frame_numbers(back, rec.rate_hz, folder / "walk.spj")
+        _frame_numbers(back, RATE_HZ, path)
 
 
 def test_the_simulator_model_names_the_truth_labels(folder: Path) -> None:
