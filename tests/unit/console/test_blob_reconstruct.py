@@ -33,12 +33,12 @@ from spotlab.simulators.centroid_model import body_marker_model, write_body_mode
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
 from spotlab.testing.centroid_scene import centroid_scene
 
-RATE_HZ, SECONDS = 100, 1.0
+RATE_HZ, SECONDS = 300, 0.7
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """``walk.spj`` (1 s of 8 cameras x 40 markers at 100 Hz, with the marker model in
+    """``walk.spj`` (0.7 s of 8 cameras x 40 markers at 300 Hz, with the marker model in
     its session metadata), ``bare.spj`` (0.3 s, no model), ``rig.toml``, ``truth.npz``,
     ``model.json``."""
     path = tmp_path_factory.mktemp("blobs")
@@ -81,13 +81,14 @@ def test_reconstruct_names_and_places_the_markers_of_the_truth(
         trial.points - _truth_at(trial.first_frame, trial.n_frames, truth), axis=-1
     )
     reported = np.isfinite(err)
-    # Measured (seed 1, 1 s at 100 Hz): 96.8 % of marker-frames labelled (the first
-    # frames earn their labels), 3945 of 3949 within 1 mm of their own marker, 4 wrong
-    # (foot markers in the first 20 frames, 50-190 mm away).
-    assert reported.mean() > 0.9
+    decoded = reported.any(axis=1)  # frames lost on a busy machine are gaps
+    # Measured (seed 1, 0.7 s at 300 Hz, 3 runs): 99.3-99.4 % of marker-frames labelled
+    # (the first frames earn their labels), none wrong; every one within 1 mm. At 100 Hz
+    # 0.1-0.5 % were wrong (foot markers in the first 30 frames).
+    assert reported[decoded].mean() > 0.9 and decoded.mean() > 0.5
     assert (err[reported] < 5.0).mean() >= 0.99
     assert (err[reported] > 20.0).mean() <= 0.003
-    assert abs(summary["labelled_fraction"] - reported.mean()) < 1e-3
+    assert abs(summary["labelled_fraction"] - reported[decoded].mean()) < 0.02
     assert summary["ghosts_rejected"] >= 0 and summary["marker_gaps"] >= 0
     assert set(summary["camera_frames"]["cam1"]) == {"offline", "overflow", "flooded", "no_blobs"}
     # The text summary.
@@ -199,15 +200,15 @@ def test_labels_option_is_refused_for_blobs(
 
 def test_a_restarted_stream_goes_on_after_a_gap_on_the_hubs_clock(folder: Path) -> None:
     # The hub's frames decoded in process (no pacing: every frame, the same each run).
-    scene = centroid_scene(1.0, RATE_HZ, seed=1, cameras=8)
+    scene = centroid_scene(0.5, RATE_HZ, seed=1, cameras=8)
     model = MarkerModel.load(folder / "model.json")
     b, k, path = scene.blobs, 50, folder / "scene.spj"
     rec = BlobRecording(b, _frame_numbers(b, RATE_HZ, path), RATE_HZ, "centroid", None)
     np.testing.assert_array_equal(rec.frame_no, rec.frame_no[0] + np.arange(b.n_frames))
     # The driver restarted the stream after frame k - 1: counters start again from 0,
-    # and the hub's clock shows 40 frame periods (0.4 s) more than the recording had.
+    # and the hub's clock shows 40 frame periods more than the recording had.
     shift = np.zeros(b.n_frames, np.int64)
-    shift[k:] = 40 * 10_000
+    shift[k:] = round(40e6 / RATE_HZ)
     frames = b.camera_frame.copy()
     frames[k:] -= frames[k]
     blobs = dataclasses.replace(b, camera_frame=frames, ticks=b.ticks + shift)
@@ -245,7 +246,7 @@ def test_a_camera_dropping_out_and_a_sunlit_camera_are_flagged_not_mislabelled(
     driver = CentroidDriver(centroid_url_for(options), cameras=8, rate_hz=RATE_HZ)
     meta = {MODEL_KEY: MarkerModel.load(folder / "model.json").to_json()}
     with Session([driver], [Recorder(tmp_path / "r.spj", meta)], close_devices=True) as s:
-        s.run_for(0.8)
+        s.run_for(0.7)
     out = tmp_path / "r.c3d"
     args = ["reconstruct", str(tmp_path / "r.spj"), "--calibration", str(folder / "rig.toml")]
     assert main([*args, "--out", str(out), "--json"]) == 0
@@ -259,6 +260,7 @@ def test_a_camera_dropping_out_and_a_sunlit_camera_are_flagged_not_mislabelled(
         trial.points - _truth_at(trial.first_frame, trial.n_frames, truth), axis=-1
     )
     reported = np.isfinite(err)
-    # Measured: 96.0 % labelled, 3186 of 3188 within 5 mm (2 wrong, > 20 mm).
-    assert reported.mean() > 0.8
+    decoded = reported.any(axis=1)  # frames lost on a busy machine are gaps
+    # Measured: 100 % labelled, all 8520 within 5 mm (at 100 Hz 2 of 3188 wrong).
+    assert reported[decoded].mean() > 0.8
     assert (err[reported] < 5.0).mean() >= 0.99
