@@ -1,36 +1,44 @@
 """Live pipeline host latency: 128 markers x 8 cameras at 300 Hz, last byte in to 3-D out.
 
 Target (TARGETS.md): p99 <= 1 ms host processing. A SELSPOT-style system cannot do it
-(128 LEDs in 100 us slots take 12.8 ms: at most 78 Hz, 4 cameras), so the frames come
-from :class:`spotlab.testing.synthetic_image2d.SyntheticImage2d`: the reference rig of
-TARGETS.md (8 cameras 1280x1024 on a 4 m ring, distortion), 128 markers moving on
-known paths, 0.2 px noise, paced by the clock at 300 Hz, arrival stamped when the
-reader wakes for a due frame (as a link's read returns with its last byte; the frames'
-image coordinates are computed before the run). Each frame goes through a real
-:class:`Session` into a :class:`LivePipeline` holding the rig loaded from TOML;
-latency = the instant the 3-D points are handed to the consumers minus the arrival
-stamp.
+(128 LEDs in 100 us slots take 12.8 ms: at most 78 Hz, 4 cameras), so the frames are
+those of :class:`spotlab.testing.synthetic_image2d.SyntheticImage2d`: the reference rig
+of TARGETS.md (8 cameras 1280x1024 on a 4 m ring, distortion), 128 markers moving on
+known paths, 0.2 px noise, 300 Hz. Each frame goes through a real :class:`Session`
+into a :class:`LivePipeline` holding the rig loaded from TOML; latency = the instant the
+3-D points are handed to the consumers minus the frame's arrival stamp.
+
+Sources: by default the frames are made and paced in a process of their own
+(:mod:`spotlab.testing.image2d_source`: raw float32 frames over a socketpair, as a
+camera system on another machine would send them); the reader waits in the kernel
+(``poll``) until bytes arrive, stamps ``arrival_ns`` when the read that completes a
+frame returns and decodes with ``np.frombuffer``. ``-inproc`` configurations use the
+in-process device instead (it sleeps in the reader until a frame is due and stamps it
+then; its frames are computed in the benchmark process).
 
 Configurations (``--configs``):
 
 * ``inline``: one device of 8 cameras, the pipeline in the reader thread;
 * ``dispatcher``: the same with the pipeline behind the session's queue and its own
   dispatcher thread (the hand-off issue 2 measured at 1.2-9 ms outliers);
-* ``matched``: two devices of 4 cameras each on one frame clock (two synchronised
-  systems), their frames matched by time, inline.
+* ``inline-inproc``, ``dispatcher-inproc``: the same with the in-process source;
+* ``matched``: two in-process devices of 4 cameras each on one frame clock (two
+  synchronised systems), their frames matched by time, inline.
 
 Figures per configuration (one JSON line each): p50 / p99 / max / mean latency (us),
-frames over 1 ms, frames in and out, incomplete groups, how far the readers fell
-behind the devices' schedule (``reader_behind_us``: stamp minus due instant; a real
-link's kernel buffer hides this from the latency), the 3-D error against the true
-paths (RMS, mm), and the machine's load before and after (other programs share the
-cores). The first ``--warmup`` seconds are not measured.
+frames over 1 ms; wall time (p50, p99) and CPU time (mean) of ``on_block`` per call;
+garbage-collector passes and the longest per generation; frames in and out, incomplete
+groups; how far the reader fell behind (``reader_behind_us``: arrival stamp minus the
+source's write instant, or minus the due instant in-process: not in the latency); the
+3-D error against the true paths (RMS, mm); the 1-minute load average at the start,
+lowest and highest during the run and at the end (other programs share the cores).
+The first ``--warmup`` seconds are not measured. Options: ``--poll-us`` (the reader
+polls with sleeps instead of waiting in the kernel), ``--gc-freeze``,
+``--keep-points`` (a PointRecorder consumer too), ``--rt-priority`` (the session's
+threads under SCHED_FIFO).
 
-Decoding is not in these figures (no wire bytes); the SPX decoder takes 30-49 us per
-4x32 frame (``benchmarks/decode_selspot.py``).
-
-Usage: ``python benchmarks/live_latency.py [--seconds 60] [--configs inline dispatcher
-matched] [--warmup 1]``
+Usage: ``python benchmarks/live_latency.py [--seconds 60] [--configs inline ...]
+[--warmup 1] [--rt-priority 10]``
 """
 
 from __future__ import annotations

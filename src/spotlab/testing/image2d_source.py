@@ -201,26 +201,15 @@ class Image2dSourceDevice:
         self._tmp: str | None = None
         self._taps: list[WireTap] = []
         self.behind = LatencyStats()
-        self._spec = StreamSpec(
-            name=name,
-            kind="image2d",
-            n_sensors=len(rig),
-            n_markers=self.n_markers,
-            rate_hz=self.rate_hz,
-            tick_hz=TICK_HZ,
-            values=("x", "y"),
-            units=("px", "px"),
-            metadata={"family": "synthetic"},
-        )
 
     @property
     def spec(self) -> StreamSpec:
-        """Description of the stream."""
-        return self._spec
+        """Description of the stream (that of the in-process device of the same frames)."""
+        return self.truth_device.spec
 
     def metadata(self) -> dict[str, Any]:
         """Family and stream description."""
-        return {"family": "synthetic", "spec": self._spec.to_dict()}
+        return self.truth_device.metadata()
 
     def add_tap(self, tap: WireTap) -> None:
         """Register a listener of link events (bytes are not passed on)."""
