@@ -36,6 +36,7 @@ from spotlab.simulators.faults import FaultEntry, FaultInjector
 from spotlab.simulators.lab import LabPublisher, frame_start
 from spotlab.simulators.motions import Motion, reference_markers
 from spotlab.simulators.psd import PsdReading
+from spotlab.simulators.rigs import ring_rig as reference_rig
 from spotlab.simulators.scene import Scene, ring_rig
 from spotlab.simulators.selspot import SelspotDevice
 from spotlab.simulators.spx_stream import SpxStream, TakenFrame
@@ -186,7 +187,7 @@ class CentroidDevice(SelspotDevice):
     Parameters
     ----------
     rig : Rig, optional
-        The cameras (default: :func:`ring_rig` of 8, 1280 x 1024).
+        The cameras (default: :func:`spotlab.simulators.rigs.ring_rig`: 8 of 1280 x 1024).
     markers : int
         Markers: the first of the 40 of :class:`GaitBody`, then static reference
         markers beyond 40.
@@ -229,7 +230,7 @@ class CentroidDevice(SelspotDevice):
         now_ns: int | None = None,
         lab: LabPublisher | None = None,
     ) -> None:
-        self.rig = rig if rig is not None else ring_rig(8)
+        self.rig = rig if rig is not None else reference_rig(8)
         n_cams = len(self.rig.cameras)
         if not 1 <= n_cams <= cw.MAX_CAMERAS:
             raise ValueError(f"a CEN hub has 1-{cw.MAX_CAMERAS} cameras, got {n_cams}")

@@ -184,3 +184,14 @@ def test_link_faults_are_detected_and_counted(tmp_path: Path) -> None:
     assert s.lost_frames == 4  # 2 damaged on the link + 2 dropped by the device
     bf = blobs_from_blocks(blocks)
     assert np.all(np.diff(bf.seq) >= 1) and bf.n_frames >= 60
+
+
+def test_hub_built_without_a_rig_uses_the_reference_ring() -> None:
+    from spotlab.simulators.centroid import CentroidDevice
+
+    device = CentroidDevice()
+    reference = ring_rig(8)
+    assert len(device.rig.cameras) == 8
+    for ours, theirs in zip(device.rig.cameras, reference.cameras, strict=True):
+        np.testing.assert_allclose(ours.center, theirs.center)
+        assert ours.size == theirs.size
