@@ -187,7 +187,10 @@ class Identifier:
         gate = np.asarray(self.gate_px * (1.0 + tracks.missed), dtype=np.float64)
         index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable)
         seen = index >= 0
-        rays = np.where(seen[..., None], xy[np.maximum(index, 0)], 0.0)
+        if xy.shape[0]:
+            rays = np.where(seen[..., None], xy[np.maximum(index, 0)], 0.0)
+        else:  # no usable blob in this frame: every track misses it
+            rays = np.zeros((*index.shape, 2))
         X, ray, kept = self.geom.triangulate(rays, seen, max_ray_px=self.ray_px)
         used = np.zeros(camera.size, dtype=bool)
         used[index[kept]] = True

@@ -11,6 +11,7 @@ from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification import (
     FLOODED,
+    NO_BLOBS,
     UNUSABLE,
     BlobFrame,
     IdentifiedFrame,
@@ -116,3 +117,22 @@ def test_another_rig_is_a_calibration_error(scene: CentroidScene, model: MarkerM
     identify = Identifier(ring_rig(8, seed=7, radius_mm=3500.0), model, check_frames=60)
     with pytest.raises(CalibrationError, match="does not match the cameras"):
         run(identify, frames(scene))
+
+
+def test_a_frame_without_blobs_is_a_gap_and_tracking_goes_on(rig: Rig, model: MarkerModel) -> None:
+    # every camera offline for a few frames (a hub that hiccups): no points, no error,
+    # and the markers are labelled again once the blobs are back
+    scene = centroid_scene(0.5, 300.0, seed=6)
+    identifier = Identifier(rig, model, check_frames=0)
+    empty = BlobFrame(np.zeros((0, 2)), np.zeros(0, dtype=int))
+    sequence: list[Any] = frames(scene)
+    sequence[60:63] = [empty] * 3
+    points, results = run(identifier, sequence)
+    assert np.all(np.isnan(points[60:63]))
+    assert np.all(results[61].camera_flags & NO_BLOBS)
+    right, wrong = score(
+        np.delete(points, range(60, 63), axis=0), np.delete(scene.markers_mm, range(60, 63), axis=0)
+    )
+    assert wrong == 0
+    assert np.isfinite(points[-1]).all(axis=-1).sum() >= 0.9 * len(model.labels)
+    assert right > 0
