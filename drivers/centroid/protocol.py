@@ -34,12 +34,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.errors import ProtocolError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.drivers.centroid.config import CentroidConfig
 from spotlab.drivers.centroid.framing import VariableFrameDecoder
 from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch
+from spotlab.drivers.mcs1.metadata import recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
 
 log = logging.getLogger(__name__)
@@ -336,18 +337,4 @@ def decoder_from_metadata(meta: Mapping[str, Any]) -> CentroidDecoder:
     ConfigurationError
         If the metadata belongs to another family or holds no CEN configuration.
     """
-    family = meta.get("family")
-    if family not in (None, "centroid"):
-        raise ConfigurationError(f"metadata of a {family!r} stream, not a centroid one")
-    config: Any = meta.get("config")
-    if config is None:
-        spec = meta.get("spec", meta)
-        config = spec.get("metadata", {}).get("config") if isinstance(spec, Mapping) else None
-    if config is None and "camera_mask" in meta:
-        config = meta
-    if not isinstance(config, Mapping):
-        raise ConfigurationError(
-            "metadata holds no CEN configuration (expected a 'config' entry with camera_mask, "
-            f"max_blobs and rate_mhz); keys found: {sorted(meta)}"
-        )
-    return CentroidDecoder.from_config(config)
+    return CentroidDecoder.from_config(recorded_config(meta, "centroid", "CEN", ("camera_mask",)))

@@ -22,6 +22,7 @@ from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.metadata import recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
 from spotlab.drivers.selspot.config import SelspotConfig, led_table
 
@@ -404,18 +405,4 @@ def decoder_from_metadata(meta: Mapping[str, Any]) -> SelspotDecoder:
     ConfigurationError
         If the metadata belongs to another family or holds no SPX configuration.
     """
-    family = meta.get("family")
-    if family not in (None, "selspot"):
-        raise ConfigurationError(f"metadata of a {family!r} stream, not a selspot one")
-    config: Any = meta.get("config")
-    if config is None:
-        spec = meta.get("spec", meta)
-        config = spec.get("metadata", {}).get("config") if isinstance(spec, Mapping) else None
-    if config is None and "cameras" in meta and "leds" in meta:
-        config = meta
-    if not isinstance(config, Mapping):
-        raise ConfigurationError(
-            "metadata holds no SPX configuration (expected a 'config' entry with cameras, "
-            f"leds and slot_us); keys found: {sorted(meta)}"
-        )
-    return SelspotDecoder.from_config(config)
+    return SelspotDecoder.from_config(recorded_config(meta, "selspot", "SPX", ("cameras", "leds")))

@@ -40,6 +40,7 @@ from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.core.ticks import unwrap_counter
 from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.metadata import recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
 from spotlab.drivers.timer.config import RECORD_BYTES, TimerConfig
 
@@ -338,18 +339,4 @@ def decoder_from_metadata(meta: Mapping[str, Any]) -> TimerDecoder:
     ConfigurationError
         If the metadata belongs to another family or holds no TMR configuration.
     """
-    family = meta.get("family")
-    if family not in (None, "timer"):
-        raise ConfigurationError(f"metadata of a {family!r} stream, not a timer one")
-    config: Any = meta.get("config")
-    if config is None:
-        spec = meta.get("spec", meta)
-        config = spec.get("metadata", {}).get("config") if isinstance(spec, Mapping) else None
-    if config is None and "slots" in meta:
-        config = meta
-    if not isinstance(config, Mapping):
-        raise ConfigurationError(
-            "metadata holds no TMR configuration (expected a 'config' entry with slots and "
-            f"rate_mhz); keys found: {sorted(meta)}"
-        )
-    return TimerDecoder.from_config(config)
+    return TimerDecoder.from_config(recorded_config(meta, "timer", "TMR", ("slots",)))
