@@ -9,7 +9,7 @@ recovery is :class:`Mcs1Driver`'s.
 from __future__ import annotations
 
 import os
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.streams import StreamSpec
@@ -60,6 +60,7 @@ class CentroidDriver(Mcs1Driver):
 
     family = "centroid"
     family_code = FAMILY_CODE
+    decoder_path = "spotlab.drivers.centroid:decoder_from_metadata"
     baud_codes: ClassVar[dict[int, int]] = CEN_BAUD_CODES
     config: CentroidConfig
     _decoder: CentroidDecoder
@@ -109,16 +110,6 @@ class CentroidDriver(Mcs1Driver):
             units=UNITS,
             metadata={"config": c.to_dict(), "layout": "cen-blobs-v1"},
         )
-
-    def metadata(self) -> dict[str, Any]:
-        """Everything a recording needs to decode this stream again."""
-        return {
-            **super().metadata(),
-            "config": self.config.to_dict(),
-            "device": None if self.device is None else self.device.to_dict(),
-            "protocol": {"transport": "MCS-1", "family_code": FAMILY_CODE, "version": 1},
-            "decoder": "spotlab.drivers.centroid:decoder_from_metadata",
-        }
 
     @property
     def decoder(self) -> CentroidDecoder:

@@ -135,11 +135,27 @@ class Mcs1Driver(Driver):
     """
 
     family_code: ClassVar[str] = ""
+    #: ``module:function`` that rebuilds the family's decoder from :meth:`metadata`.
+    decoder_path: ClassVar[str] = ""
     #: Baud rate -> ``COMM`` code the family's devices accept.
     baud_codes: ClassVar[Mapping[int, int]] = BAUD_CODES
     #: The family's configuration (set by the subclass before :meth:`_setup`).
     config: Mcs1Config
     _decoder: Mcs1Decoder
+
+    def metadata(self) -> dict[str, Any]:
+        """Everything a recording needs to decode this stream again.
+
+        The family's ``decoder_from_metadata(driver.metadata())`` rebuilds the decoder.
+        """
+        device = getattr(self, "device", None)  # what the device said of itself (VER:0)
+        return {
+            **super().metadata(),
+            "config": self.config.to_dict(),
+            "device": None if device is None else device.to_dict(),
+            "protocol": {"transport": "MCS-1", "family_code": self.family_code, "version": 1},
+            "decoder": self.decoder_path,
+        }
 
     def _setup(
         self,

@@ -21,7 +21,6 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Iterable
-from typing import Any
 
 from spotlab.core.errors import (
     ConfigurationError,
@@ -83,6 +82,7 @@ class SelspotDriver(Mcs1Driver):
 
     family = "selspot"
     family_code = FAMILY_CODE
+    decoder_path = "spotlab.drivers.selspot:decoder_from_metadata"
     config: SelspotConfig
     _decoder: SelspotDecoder
 
@@ -137,19 +137,6 @@ class SelspotDriver(Mcs1Driver):
             units=UNITS,
             metadata={"config": c.to_dict(), "led_ids": [led for led, _ in c.leds]},
         )
-
-    def metadata(self) -> dict[str, Any]:
-        """Everything a recording needs to decode this stream again.
-
-        ``decoder_from_metadata(driver.metadata())`` rebuilds the decoder.
-        """
-        return {
-            **super().metadata(),
-            "config": self.config.to_dict(),
-            "device": None if self.device is None else self.device.to_dict(),
-            "protocol": {"transport": "MCS-1", "family_code": FAMILY_CODE, "version": 1},
-            "decoder": "spotlab.drivers.selspot:decoder_from_metadata",
-        }
 
     @property
     def decoder(self) -> SelspotDecoder:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from typing import Any
 
 from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.streams import StreamSpec
@@ -62,6 +61,7 @@ class TimerDriver(Mcs1Driver):
 
     family = "timer"
     family_code = FAMILY_CODE
+    decoder_path = "spotlab.drivers.timer:decoder_from_metadata"
     config: TimerConfig
     _decoder: TimerDecoder
 
@@ -107,16 +107,6 @@ class TimerDriver(Mcs1Driver):
             units=UNITS,
             metadata={"config": c.to_dict(), "layout": "timer-edges-v1"},
         )
-
-    def metadata(self) -> dict[str, Any]:
-        """Everything a recording needs to decode this stream again."""
-        return {
-            **super().metadata(),
-            "config": self.config.to_dict(),
-            "device": None if self.device is None else self.device.to_dict(),
-            "protocol": {"transport": "MCS-1", "family_code": FAMILY_CODE, "version": 1},
-            "decoder": "spotlab.drivers.timer:decoder_from_metadata",
-        }
 
     @property
     def decoder(self) -> TimerDecoder:
