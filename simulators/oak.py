@@ -112,6 +112,9 @@ class FakeOakDevice:
         self.rng = np.random.default_rng(seed)
         self.settings: Any = None
         self.opened = self.started = self.closed = False
+        #: What the board reported at start (a real board: USB speed, sensors).
+        self.info: dict[str, str] = {}
+        self.starts = 0
         self._k = 0
         self._start_ns = 0
 
@@ -130,8 +133,17 @@ class FakeOakDevice:
         """Start the virtual exposure clock now."""
         if not self.opened:
             raise DeviceError(f"fake OAK {self.mxid}: open() before start()")
+        if self.started:
+            raise DeviceError(f"fake OAK {self.mxid}: the pipeline is already running")
         self._start_ns = time.monotonic_ns()
+        self._k = 0
         self.started = True
+        self.starts += 1
+        self.info = {"usb_speed": "SUPER"}
+
+    def stop(self) -> None:
+        """Stop streaming; :meth:`start` may follow (frames count from 0 again)."""
+        self.started = False
 
     def frames(self, timeout: float) -> list[FakeFrame]:
         """The next frame of every camera; none once ``n_frames`` are out."""
