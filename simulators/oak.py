@@ -154,6 +154,8 @@ class FakeOakDevice:
             return []
         k = self._k
         self._k += 1
+        if k == 0:
+            self._report_first()
         host_ns = self.exposure_mid_ns(k)
         device_ns = round(self.clock.device_us(host_ns) * 1000)
         out = []
@@ -177,6 +179,16 @@ class FakeOakDevice:
                 )
             )
         return out
+
+    def _report_first(self) -> None:
+        """What a real board's first images say: GRAY8 at the asked size, and the FSIN
+        mode the sensor ran in (master: first socket drives, the others follow)."""
+        w, h = self.settings.size
+        for i, socket in enumerate(self.sockets):
+            self.info[f"format.{socket}"] = f"GRAY8 {w}x{h}"
+            sync = self.settings.sync
+            mode = {"master": "OUTPUT" if i == 0 else "INPUT", "slave": "INPUT"}.get(sync, "NONE")
+            self.info[f"fsync.{socket}"] = mode
 
     def close(self) -> None:
         """Stop; safe twice."""

@@ -167,6 +167,8 @@ class OakDriver(Driver):
             for board in self.boards:
                 board.stop()
         finally:
+            # Images of a stopped run never match the next run's: drop them.
+            self._pending = [deque() for _ in self.cameras]
             self._tap_event("stopped")
 
     def _close(self) -> None:
