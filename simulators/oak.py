@@ -50,7 +50,10 @@ class FakeOakDevice:
 
     Frame ``k`` is exposed around ``start + k / fps`` (host clock); its marker
     positions are the motion's at that instant. Each call of :meth:`frames` returns
-    the next frame of every camera (no pacing: tests run as fast as the host).
+    the next frame of every camera (no pacing: tests run as fast as the host). Like a
+    running depthai pipeline it refuses a second :meth:`start`; :meth:`stop` lets a
+    new run begin (frames count from 0 again). ``info`` says what a real board would
+    report (USB ``SUPER``; the first images' format and FSIN mode).
 
     Parameters
     ----------

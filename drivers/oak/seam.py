@@ -152,6 +152,10 @@ class OakCamera(Protocol):
         The board's device id.
     sockets : tuple of str
         Its mono camera sockets, in the order the driver numbers them.
+    info : dict of str to str
+        What the board reported: ``usb_speed`` and ``sensor.<socket>`` after
+        :meth:`start`, ``format.<socket>`` and ``fsync.<socket>`` once that camera's
+        first image arrived (docs/oak.md).
     """
 
     mxid: str
