@@ -15,11 +15,11 @@ from spotlab.drivers.oak import (
     FLAG_OFFLINE,
     CameraSettings,
     OakDriver,
+    OakInUseError,
     OakRecordDecoder,
     UsbPermissionError,
 )
 from spotlab.drivers.oak.depthai_camera import _check_found
-from spotlab.drivers.oak.seam import OakInUseError
 from spotlab.simulators.motions import reference_markers
 from spotlab.simulators.oak import FakeOakDevice, oak_rig
 
