@@ -218,7 +218,8 @@ class DepthaiCamera:
         Raises
         ------
         DeviceDisconnected
-            A queue was closed under the driver (board unplugged or reset).
+            A queue was closed under the driver (board unplugged or reset), or depthai
+            raised a RuntimeError reading it (XLink communication lost).
         DeviceError
             With FSIN asked for, a camera's first image says it was not synchronised.
         """
@@ -230,7 +231,7 @@ class DepthaiCamera:
             if timeout > 0 and not any(q.has() for q in queues):
                 dai.MessageQueue.waitAny(queues, datetime.timedelta(seconds=timeout))
             got = {socket: q.tryGetAll() for socket, q in self._queues.items()}
-        except dai.MessageQueue.QueueException as exc:
+        except (dai.MessageQueue.QueueException, RuntimeError) as exc:
             raise DeviceDisconnected(
                 f"OAK {self.mxid} went away while streaming ({exc}): check its cable and "
                 "power, then start again"
@@ -254,22 +255,22 @@ class DepthaiCamera:
         return out
 
     def _check_first(self, socket: str, frame: Any) -> None:
-        """Record the first image's format and FSIN mode; refuse it unsynchronised."""
-        self._checked.add(socket)
+        """Record the first image's format and FSIN mode; refuse it unsynchronised
+        (and every later image of that camera, which is checked again)."""
         fsync = frame.getFsync().name
         self.info[f"format.{socket}"] = (
             f"{frame.getType().name} {frame.getWidth()}x{frame.getHeight()}"
         )
         self.info[f"fsync.{socket}"] = fsync
         settings = self._settings
-        if settings is None or settings.sync == "off" or settings.allow_unsynced:
-            return
-        if fsync == "NONE":
+        wants_fsync = settings is not None and settings.sync != "off"
+        if wants_fsync and settings is not None and not settings.allow_unsynced and fsync == "NONE":
             raise DeviceError(
                 f"OAK {self.mxid} {socket}: FSIN {settings.sync} was set but its first image "
                 "was not taken under frame sync (ImgFrame.getFsync() is NONE): check the "
                 "FSIN cable and the master, or pass CameraSettings(allow_unsynced=True)"
             )
+        self._checked.add(socket)
 
     def stop(self) -> None:
         """Stop the pipeline and release the board; :meth:`start` rebuilds both."""
