@@ -6,11 +6,19 @@ from __future__ import annotations
 import datetime
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
 from spotlab.core.errors import ConfigurationError, DeviceDisconnected, DeviceError, DeviceNotFound
-from spotlab.drivers.oak import CameraSettings, OakDriver, OakInUseError, UsbPermissionError
+from spotlab.drivers.oak import (
+    FLAG_OFFLINE,
+    CameraSettings,
+    OakDriver,
+    OakInUseError,
+    UsbPermissionError,
+)
 from spotlab.drivers.oak.depthai_camera import DepthaiCamera, find_devices, fsync_modes
+from spotlab.drivers.oak.driver import MAX_WAIT_PERIODS
 
 pytest.importorskip("depthai", reason="the oak extra is not installed")
 from spotlab.simulators.oak_depthai import FakeBoard, FakeDepthai
@@ -229,3 +237,30 @@ def test_usb_speed_sensors_format_and_fsync_are_reported(cameras: list[DepthaiCa
         cam.frames(2.0)
     assert cam.info["format.CAM_B"] == cam.info["format.CAM_C"] == "GRAY8 64x40"
     assert (cam.info["fsync.CAM_B"], cam.info["fsync.CAM_C"]) == ("OUTPUT", "INPUT")
+
+
+def test_a_dead_board_does_not_hold_up_the_live_one() -> None:
+    # Board 0 never delivers; board 1 sends 20 images per camera at 20 Hz into
+    # 8-image queues. Waiting on board 0 for the whole timeout would drop 12 of them.
+    dead = FakeBoard("MX0", name="1.1", dead={"CAM_B", "CAM_C"})
+    live = FakeBoard("MX1", name="1.2", n_frames=20)
+    dai = FakeDepthai([dead, live])
+    boards = [DepthaiCamera(b.mxid, dai=dai) for b in (dead, live)]
+    driver = OakDriver(
+        "MX0,MX1", boards=boards, settings=_settings(allow_unsynced=True), max_blobs=4
+    )
+    seen: list[int] = []
+    try:
+        driver.start()
+        for _ in range(40):
+            block = driver.recv(timeout=2.0)
+            if block is None:
+                break
+            online = (block.flags[:, 0, 2] & FLAG_OFFLINE) == 0
+            seen += [int(t) for t in block.ticks[online]]
+    finally:
+        driver.close()
+    # The last MAX_WAIT_PERIODS images wait for newer ones that never come (the board
+    # fell silent); every one before them is there, one period apart.
+    assert len(seen) == 20 - MAX_WAIT_PERIODS
+    assert np.all(np.abs(np.diff(seen) - 50_000_000) <= 1000)
