@@ -310,6 +310,12 @@ class Mcs1Driver(Driver):
             log.warning("%s: port lost while stopping: %s", self.port, exc)
         self._tap_event("stopped")
 
+    def drain(self) -> list[FrameBlock]:
+        """Frames decoded but not yet returned by :meth:`recv` (those that arrived while
+        the driver waited for its reply to ``STOP:``), handed over once."""
+        blocks, self._stash = self._stash, []
+        return blocks
+
     def _await_event_reply(self, command: str, okay_only: bool = False) -> Reply:
         """Decode frames until the reply's event frame; keep the frames for ``recv``.
 
