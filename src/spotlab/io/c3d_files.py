@@ -10,6 +10,7 @@ tolerated in real files).
 from __future__ import annotations
 
 import os
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -122,6 +123,14 @@ def _read_metadata(path: str | Path, handle: Any) -> tuple[C3DHeader, C3DParamet
         raise FileFormatError(path, "not a readable C3D file (no C3D header)")
     handle.seek((raw[0] - 1) * 512)
     section = handle.read(MAX_PARAMETER_BLOCKS * 512)
+    # the section's length: its own block count, or up to the data when that says more
+    # (a chain of records that runs on past both is cut there: sample02's SGI copies)
+    blocks = section[2] if len(section) > 2 else 0
+    mips = len(section) > 3 and section[3] == 86  # big-endian words
+    data_block = struct.unpack(">H" if mips else "<H", raw[16:18])[0]
+    if data_block > raw[0]:
+        blocks = max(blocks, data_block - raw[0])
+    section = section[: 512 * blocks] if blocks else section
     try:
         processor = read_processor(raw, section)
         params = parse_parameters(section, section[3])

@@ -268,11 +268,12 @@ def parse_parameters(section: bytes, processor_code: int) -> C3DParameters:
             break
         pos += 2 + abs(n_chars) + next_offset
     repeats: dict[str, int] = {}
+    orphans: dict[int, int] = {}
     for gid, param in pending:
         group = group_names.get(gid, "")
         if not group:
             group = f"GROUP{gid}"
-            out.notes.append(f"{param.name} belongs to group id {gid}, which has no group record")
+            orphans[gid] = orphans.get(gid, 0) + 1
         param.group = group
         out.descriptions.setdefault(group, "")
         if param.name in out.groups.get(group, {}):
@@ -285,6 +286,10 @@ def parse_parameters(section: bytes, processor_code: int) -> C3DParameters:
         out.notes.append(
             f"{len(repeats)} parameter(s) given more than once ({shown}{more}): "
             "the last record of each is used"
+        )
+    for gid, count in orphans.items():
+        out.notes.append(
+            f"{count} parameter(s) of group id {gid}, which has no group record: kept as GROUP{gid}"
         )
     out.repeated = repeats
     return out

@@ -203,3 +203,23 @@ def test_first_frame_past_the_16_bit_header_survives(tmp_path: Path, first: int)
     trial = Trial(np.zeros((3, 1, 3)), ["a"], 300.0, first_frame=first)
     write_c3d(tmp_path / "late.c3d", trial)
     assert read_c3d(tmp_path / "late.c3d").first_frame == first
+
+
+def test_unreadable_parameters_are_named_and_counted(tmp_path: Path) -> None:
+    """A parameter of the wrong type is taken as absent, and the file's notes say which."""
+    path = tmp_path / "t.c3d"
+    trial = _trial()
+    write_c3d(path, trial)
+    data = bytearray(path.read_bytes())
+    for name in (b"OFFSET", b"GEN_SCALE"):  # each occurs once: ANALOG's
+        at = data.index(bytes([len(name)]) + bytes([data[data.index(name) - 1]]) + name)
+        type_byte = at + 2 + len(name) + 2  # after the name and the 2-byte pointer
+        assert data[type_byte] in (2, 4)
+        data[type_byte] = 0xFF  # now a character parameter
+    path.write_bytes(bytes(data))
+    back = read_c3d(path)
+    failures = back.metadata["unreadable_parameters"]
+    assert [f.split(" ")[0] for f in failures] == ["ANALOG:OFFSET", "ANALOG:GEN_SCALE"]
+    assert all("type -1" in f for f in failures)
+    assert any(n.startswith("2 parameter(s) could not be read") for n in back.metadata["notes"])
+    assert np.array_equal(back.analog, trial.analog)  # the defaults (0 and 1) were written
