@@ -51,7 +51,9 @@ def dec_to_ieee(raw: bytes | np.ndarray) -> np.ndarray:
     words = np.frombuffer(bytes(raw), dtype="<u2").reshape(-1, 2)[:, ::-1]
     swapped = np.ascontiguousarray(words).view("<f4").ravel()
     zero = (words[:, 1] & 0x7F80) == 0
-    return np.where(zero, np.float32(0.0), swapped / np.float32(4.0)).astype(np.float32)
+    with np.errstate(invalid="ignore", over="ignore"):  # NaN and infinite patterns stay so
+        quarter = swapped / np.float32(4.0)
+    return np.where(zero, np.float32(0.0), quarter).astype(np.float32)
 
 
 def to_intel(raw: bytes, kind: int, processor: str) -> bytes:
