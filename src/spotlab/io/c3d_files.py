@@ -177,7 +177,7 @@ def _decode(
     if scale == 0 or not np.isfinite(scale):
         raise FileFormatError(path, "POINT:SCALE and the header scale factor are both 0")
     if abs(scale - header.scale_factor) > 1e-6 * abs(scale):
-        notes.append(f"POINT:SCALE {scale:g} used; the header says {header.scale_factor:g}")
+        scale = _settle_scale(scale, header.scale_factor, notes)
     is_float = scale < 0
     point_rate = get("POINT:RATE", "float") or header.frame_rate
     if not (point_rate > 0 and np.isfinite(point_rate)):
@@ -306,6 +306,27 @@ def _decode(
             "c3d_parameters": params,
         },
     )
+
+
+def _settle_scale(parameter: float, in_header: float, notes: list[str]) -> float:
+    """The point scale when POINT:SCALE and the header's copy disagree.
+
+    Integer storage in both: the header's value, which the recording system wrote
+    beside the data. The one shared file where they differ (MACsample, sample06)
+    decides it: with the header's 0.05511 its markers are an adult's (foot 191 mm,
+    shoulders 404 mm apart, shoulder marker up to 1.49 m, walking at 1.22 m/s); with
+    POINT:SCALE 0.02154 they would be 0.39 times that (a 75 mm foot, a shoulder at
+    0.58 m) - see docs/files.md. Otherwise (float storage, where the scale only
+    gives the storage by its sign): the parameter, as the C3D manual says.
+    """
+    if parameter > 0 and in_header > 0 and np.isfinite(in_header):
+        notes.append(
+            f"header scale {in_header:g} used; POINT:SCALE says {parameter:g} "
+            f"(x {parameter / in_header:.4g})"
+        )
+        return in_header
+    notes.append(f"POINT:SCALE {parameter:g} used; the header says {in_header:g}")
+    return parameter
 
 
 def _scale_analog(

@@ -230,11 +230,27 @@ def test_units_are_converted_to_mm(shared_data: Path) -> None:
     assert 500 < span < 20000, span
 
 
-def test_scale_disagreement_is_noted(shared_data: Path) -> None:
-    """MACsample: POINT:SCALE 0.02154, header 0.05511; the parameter is used, the note says so."""
+def test_scale_disagreement_is_settled_by_the_marker_distances(shared_data: Path) -> None:
+    """MACsample: POINT:SCALE 0.02154, header 0.05511. The header's gives an adult's body.
+
+    newwalk.c3d (same vendor, same folder, a file that follows the manual) is the
+    yardstick: its foot (heel-toe) is 168-171 mm, its shoulders 311 mm apart.
+    """
     trial = _read(shared_data, "c3d_org_samples/sample06/MACsample.c3d")
-    assert trial.metadata["point_scale"] == pytest.approx(0.021541, abs=1e-6)
-    assert any("header says 0.0551" in note for note in trial.metadata["notes"])
+    assert trial.metadata["point_scale"] == pytest.approx(0.0551136, abs=1e-6)
+    assert any("POINT:SCALE says 0.0215" in note for note in trial.metadata["notes"])
+
+    def distance(t: Trial, a: str, b: str) -> float:
+        i, j = t.labels.index(a), t.labels.index(b)
+        return float(np.nanmedian(np.linalg.norm(t.points[:, i] - t.points[:, j], axis=1)))
+
+    reference = _read(shared_data, "c3d_org_samples/sample06/newwalk.c3d")
+    for a, b, low, high in (("RHEE", "RTOE", 185, 195), ("RSHO", "LSHO", 398, 410)):
+        assert low < distance(trial, a, b) < high, (a, b)
+        ratio = distance(trial, a, b) / distance(reference, a, b)
+        assert 1.0 < ratio < 1.4, (a, b, ratio)  # the parameter's scale would give 0.44-0.51
+    shoulder = trial.points[:, trial.labels.index("RSHO"), 2]
+    assert 1450 < np.nanmax(shoulder) < 1550  # mm above the floor
 
 
 def test_simi_all_residuals_invalid(shared_data: Path) -> None:
