@@ -223,3 +223,50 @@ def test_unreadable_parameters_are_named_and_counted(tmp_path: Path) -> None:
     assert all("type -1" in f for f in failures)
     assert any(n.startswith("2 parameter(s) could not be read") for n in back.metadata["notes"])
     assert np.array_equal(back.analog, trial.analog)  # the defaults (0 and 1) were written
+
+
+def test_more_than_255_markers_use_labels2(tmp_path: Path) -> None:
+    """A parameter's dimensions are bytes: labels 256 on go to POINT:LABELS2 (ezc3d reads both)."""
+    rng = np.random.default_rng(8)
+    labels = [f"M{i:03d}" for i in range(300)]
+    trial = Trial(_f32(rng.normal(0.0, 400.0, (5, 300, 3))), labels, 100.0)
+    path = tmp_path / "many.c3d"
+    write_c3d(path, trial)
+    back = read_c3d(path)
+    assert back.labels == labels
+    assert np.array_equal(back.points, trial.points)
+    params = back.metadata["c3d_parameters"]
+    assert params.get("POINT:LABELS").dims == (4, 255)
+    assert params.get("POINT:LABELS2").dims == (4, 45)
+    dump = ezc3d_dump(path, tmp_path / "d.npz", ("POINT:LABELS", "POINT:LABELS2"))
+    assert dump["points"].shape == (5, 300, 3)
+    assert dump["params"]["POINT:LABELS"] + dump["params"]["POINT:LABELS2"] == labels
+
+
+def test_parameters_survive_serialisation() -> None:
+    """Every type and shape, a locked flag and descriptions, parsed back as written."""
+    from spotlab.io.c3d_parameters import (
+        C3DParameters,
+        make_parameter,
+        parse_parameters,
+        serialize_parameters,
+    )
+
+    params = C3DParameters()
+    params.put(make_parameter("POINT", "USED", 7, "points"))
+    params.put(make_parameter("POINT", "LABELS", ["a", "long name"], "labels"))
+    params.put(make_parameter("FORCE_PLATFORM", "CAL_MATRIX", np.arange(72.0).reshape(6, 6, 2)))
+    params.put(make_parameter("FORCE_PLATFORM", "CHANNEL", np.arange(12).reshape(6, 2)))
+    params.put(make_parameter("TRIAL", "NAME", "walk 3"))
+    params.groups["POINT"]["USED"].locked = True
+    params.descriptions["TRIAL"] = "the trial"
+    back = parse_parameters(serialize_parameters(params), 84)
+    assert back.notes == []
+    for group, members in params.groups.items():
+        assert list(back.groups[group]) == list(members)
+        for name, param in members.items():
+            assert back.groups[group][name] == param, (group, name)
+    assert back.descriptions["TRIAL"] == "the trial"
+    cal = back.get("FORCE_PLATFORM:CAL_MATRIX")
+    assert cal.dims == (6, 6, 2) and cal.floats()[1] == 12.0  # [1, 0, 0]: first index fastest
+    assert back.get("POINT:LABELS").strings() == ["a", "long name"]
