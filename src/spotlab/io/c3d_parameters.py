@@ -216,8 +216,9 @@ def parse_parameters(section: bytes, processor_code: int) -> C3DParameters:
 
     * two groups with one name (Vicon Nexus writes an empty second PROCESSING group,
       sample33): their parameters are merged under the name;
-    * a parameter given twice in a group (MARKERDIAMETER in sample33): the **later**
-      record wins, as in ezc3d (a writer that appends a corrected value puts it last);
+    * a parameter given more than once in a group (113 PROCESSING parameters in
+      sample33, up to 30 times): the **last** record wins. There the later records
+      hold the newer values, and ezc3d keeps the last too, so both readers agree;
     * a parameter whose group id has no group record: kept under ``GROUPn``;
     * a record that does not fit the section, an unknown type code, a name that is not
       printable or a pointer that goes backwards (sample18's last "group": a 9-byte
@@ -261,8 +262,7 @@ def parse_parameters(section: bytes, processor_code: int) -> C3DParameters:
             seen_groups.add(-gid)
             group_names[-gid] = group
             out.descriptions.setdefault(group, str(body))
-        else:
-            assert isinstance(body, C3DParameter)
+        elif isinstance(body, C3DParameter):
             body.locked = n_chars < 0
             body.name = name.upper()
             pending.append((gid, body))

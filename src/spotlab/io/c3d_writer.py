@@ -107,7 +107,7 @@ def _parameters(trial: Trial, drop: set[str]) -> C3DParameters:
     """The file's groups (a copy) with everything that describes the data set from ``trial``."""
     brought = trial.metadata.get("c3d_parameters")
     params = copy.deepcopy(brought) if isinstance(brought, C3DParameters) else C3DParameters()
-    params.notes = []
+    params.notes, params.repeated = [], {}
     for group in drop:
         params.groups.pop(group, None)
         params.descriptions.pop(group, None)
