@@ -115,7 +115,8 @@ def test_force_plates_survive_our_writer(shared_data: Path, tmp_path: Path, name
     forces_out = _ezc3d_forces(copy)
     assert forces_src.shape == forces_out.shape and forces_src.size > 0
     scale = np.nanmax(np.abs(forces_src))
-    assert np.nanmax(np.abs(forces_out - forces_src)) < 1e-5 * scale
+    # measured: 3.0e-8, 3.9e-8, 2.1e-9 of the largest value (analog rounded to float32)
+    assert np.nanmax(np.abs(forces_out - forces_src)) < 2e-7 * scale
     # the c3d package reads the group too
     c3d = pytest.importorskip("c3d")
     with warnings.catch_warnings():
