@@ -17,7 +17,7 @@ import json
 import os
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -29,13 +29,24 @@ from scipy.spatial.distance import squareform
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction.rigid import rigid_pose
 
-__all__ = ["Link", "MarkerModel", "Segment"]
+__all__ = ["Link", "MarkerModel", "Segment", "rigid_tolerance"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 #: Links a marker on no rigid cluster needs to be labelled by its links alone.
 MIN_LINKS = 3
+#: Chosen rigid tolerance: this many times the typical spread of a marker's second most
+#: rigid partner, and at least ``TOLERANCE_FLOOR_MM``.
+TOLERANCE_FACTOR = 2.0
+TOLERANCE_FLOOR_MM = 2.0
+#: Chosen link spread: this many rigid tolerances, and at least ``LINK_FLOOR_MM``.
+LINK_FACTOR = 5.0
+LINK_FLOOR_MM = 50.0
+#: A trial moves when at least this share of marker pairs varies by more than
+#: ``MOVING_TOLERANCES`` rigid tolerances.
+MOVING_SHARE = 0.25
+MOVING_TOLERANCES = 4.0
 
 
 @dataclass(frozen=True)
@@ -86,11 +97,19 @@ class MarkerModel:
     links : tuple of Link
         Distance ranges of marker pairs not on a common segment. A marker on no
         segment needs at least three.
+    tolerance_mm : float or None
+        Largest distance spread (mm) of the pairs taken as rigid when the clusters were
+        found (:meth:`infer`); None when the segments were given.
+    link_spread_mm : float or None
+        Largest distance spread (mm) of the pairs taken as links; None: links not
+        learnt by spread.
     """
 
     labels: tuple[str, ...]
     segments: tuple[Segment, ...]
     links: tuple[Link, ...] = ()
+    tolerance_mm: float | None = None
+    link_spread_mm: float | None = None
 
     def __post_init__(self) -> None:
         M = len(self.labels)
@@ -165,6 +184,7 @@ class MarkerModel:
         segments: Mapping[str, Sequence[str]],
         *,
         link_spread_mm: float | None = None,
+        min_links: int = 0,
     ) -> MarkerModel:
         """Learn each segment's layout (and links) from labelled trajectories.
 
@@ -179,6 +199,9 @@ class MarkerModel:
             Link every pair of markers not on a common segment whose distance varies by
             less than this over the frames (its range seen is the link's). None: no
             links, every marker must be on a segment.
+        min_links : int
+            With ``link_spread_mm``: a marker on no segment with fewer links than this
+            is also linked to its least varying partners until it has this many.
 
         Returns
         -------
@@ -217,9 +240,10 @@ class MarkerModel:
             for s, seg in enumerate(out):
                 owner[list(seg.markers)] = s
             a, b = np.triu_indices(len(labels), 1)
-            keep = (hi[a, b] - lo[a, b] < link_spread_mm) & (
-                (owner[a] < 0) | (owner[a] != owner[b])
-            )
+            apart = (owner[a] < 0) | (owner[a] != owner[b])
+            keep = (hi[a, b] - lo[a, b] < link_spread_mm) & apart
+            if min_links > 0:
+                keep |= _least_varying(lo, hi, owner, a, b, keep, apart, min_links)
             links = [
                 Link(int(i), int(j), float(lo[i, j]), float(hi[i, j]))
                 for i, j in zip(a[keep], b[keep], strict=True)
@@ -232,7 +256,7 @@ class MarkerModel:
         labels: Sequence[str],
         positions: Any,
         *,
-        tolerance_mm: float = 2.0,
+        tolerance_mm: float | None = None,
         link_spread_mm: float | None = None,
     ) -> MarkerModel:
         """Find the rigid clusters themselves: markers whose distances stay constant.
@@ -241,28 +265,58 @@ class MarkerModel:
         over the frames where both are seen is below ``tolerance_mm``; a segment is a
         group of 3 or more in which every pair is linked (complete-linkage clustering of
         the spreads, cut at ``tolerance_mm``), so markers near a joint, linked to both
-        neighbours, do not join two segments into one. With ``link_spread_mm``, pairs
-        whose distance varies by less than that become links (see
-        :meth:`from_trajectories`) and markers on no cluster of 3 are labelled by them;
-        a group on a line (its rotation about the line unknown) is no segment either.
-        A trial that hardly moves makes every marker look rigid: learn from one in which
-        the segments move through their range.
+        neighbours, do not join two segments into one. Pairs whose distance varies by
+        less than ``link_spread_mm`` become links (see :meth:`from_trajectories`) and
+        markers on no cluster of 3 are labelled by them; a group on a line (its rotation
+        about the line unknown) is no segment either.
+
+        Parameters
+        ----------
+        labels : sequence of str, length M
+        positions : array_like, shape (F, M, 3)
+            Labelled trajectories (mm), NaN where missing.
+        tolerance_mm : float, optional
+            Largest spread of a rigid pair (mm). Default: chosen from the trial
+            (:func:`rigid_tolerance`): twice the median, over the markers, of each
+            marker's second-smallest spread, and at least 2 mm.
+        link_spread_mm : float, optional
+            Largest spread of a link (mm); 0 for no links (every marker must then be on
+            a cluster). Default: ``5 * tolerance_mm``, at least 50 mm, and every marker
+            off the clusters also linked to its 3 least varying partners, so that it
+            can be labelled by its links.
+
+        Returns
+        -------
+        MarkerModel
+            With the tolerance and link spread it was learnt with
+            (:attr:`MarkerModel.tolerance_mm`, :attr:`MarkerModel.link_spread_mm`).
 
         Raises
         ------
         ReconstructionError
-            When a marker is on no cluster of 3 or more and has fewer than 3 links.
+            For a trial that hardly moves (most distances constant: every marker looks
+            rigid; learn from a trial in which the segments move through their range),
+            or a marker on no cluster of 3 or more with fewer than 3 links.
         """
         labels = tuple(str(x) for x in labels)
         X = _positions(positions, len(labels))
         lo, hi = _distance_range(X)
         spread = np.nan_to_num(hi - lo, nan=1e9)
         np.fill_diagonal(spread, 0.0)
-        tree = linkage(squareform(np.maximum(spread, spread.T), checks=False), "complete")
+        spread = np.maximum(spread, spread.T)
+        if tolerance_mm is None:
+            tolerance_mm = rigid_tolerance(spread)
+            _check_motion(spread, tolerance_mm)
+        if link_spread_mm is None:
+            link_spread_mm = max(LINK_FLOOR_MM, LINK_FACTOR * tolerance_mm)
+            min_links = MIN_LINKS
+        else:
+            min_links = 0
+        tree = linkage(squareform(spread, checks=False), "complete")
         group = fcluster(tree, tolerance_mm, criterion="distance") - 1
         groups = [[labels[m] for m in np.flatnonzero(group == g)] for g in np.unique(group)]
         small = [g for g in groups if len(g) < 3]
-        if small and link_spread_mm is None:
+        if small and link_spread_mm <= 0:
             raise ReconstructionError(
                 "markers on no rigid cluster of 3 or more: "
                 + "; ".join(", ".join(v) for v in small)
@@ -270,19 +324,32 @@ class MarkerModel:
             )
         index = {name: m for m, name in enumerate(labels)}
         solid = [g for g in groups if len(g) >= 3 and _spans_a_plane(X[:, [index[x] for x in g]])]
-        if len(solid) < len(groups) - len(small) and link_spread_mm is None:
+        if len(solid) < len(groups) - len(small) and link_spread_mm <= 0:
             raise ReconstructionError(
                 "markers on a line cannot make a rigid cluster: "
                 + "; ".join(", ".join(g) for g in groups if len(g) >= 3 and g not in solid)
                 + " (give link_spread_mm to label them by their distance links)"
             )
         segments = {f"segment{k + 1}": g for k, g in enumerate(solid)}
-        return cls.from_trajectories(labels, X, segments, link_spread_mm=link_spread_mm)
+        model = cls.from_trajectories(
+            labels,
+            X,
+            segments,
+            link_spread_mm=link_spread_mm if link_spread_mm > 0 else None,
+            min_links=min_links,
+        )
+        return replace(
+            model,
+            tolerance_mm=float(tolerance_mm),
+            link_spread_mm=float(link_spread_mm) if link_spread_mm > 0 else None,
+        )
 
     def to_json(self) -> dict[str, Any]:
         """JSON-safe description (the file layout of :meth:`save`)."""
         return {
             "labels": list(self.labels),
+            "tolerance_mm": self.tolerance_mm,
+            "link_spread_mm": self.link_spread_mm,
             "segments": [
                 {
                     "name": seg.name,
@@ -326,9 +393,15 @@ class MarkerModel:
                      float(k["range_mm"][0]), float(k["range_mm"][1]))
                 for k in data.get("links", [])
             )  # fmt: skip
-        except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+            tolerance = data.get("tolerance_mm")
+            link_spread = data.get("link_spread_mm")
+            learnt = (
+                None if tolerance is None else float(tolerance),
+                None if link_spread is None else float(link_spread),
+            )
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
             raise ReconstructionError(f"{path}: not a marker model ({exc})") from None
-        return cls(labels, segments, links)
+        return cls(labels, segments, links, *learnt)
 
 
 def _positions(positions: Any, M: int) -> FloatArray:
@@ -364,3 +437,75 @@ def _distance_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
             hi = np.fmax(hi, np.nanmax(D, axis=0))
     never = ~np.isfinite(lo) | ~np.isfinite(hi)
     return np.where(never, np.nan, lo), np.where(never, np.nan, hi)
+
+
+def rigid_tolerance(spread: FloatArray) -> float:
+    """The rigid tolerance (mm) of a trial from its distance spreads.
+
+    Parameters
+    ----------
+    spread : ndarray, shape (M, M)
+        Spread (max - min, mm) of the distance of every marker pair over the trial;
+        large for pairs never seen together.
+
+    Returns
+    -------
+    float
+        ``TOLERANCE_FACTOR`` (2) times the median over the markers of each marker's
+        second-smallest spread, and at least ``TOLERANCE_FLOOR_MM`` (2 mm).
+
+    Notes
+    -----
+    A marker of a cluster of three has two partners on its segment, so its
+    second-smallest spread is that of a pair on one segment: skin sliding over bone
+    and the lab's noise (a few mm for skin markers, ~0 for a rigid plate or the
+    simulator's truth). Pairs across a joint vary by tens to hundreds of mm as the
+    joint flexes. The median over the markers is the typical within-segment spread,
+    robust to the markers near joints or alone on their segment, whose second-smallest
+    spread is a cross-joint one. Twice that leaves room for frames the model never
+    saw (a range seen on part of a trial only grows on the rest) while staying well
+    below the cross-joint spreads; the floor keeps exactly rigid data (the
+    simulator's) at the tolerance its labelling was measured with.
+    """
+    S = np.array(spread, dtype=np.float64)
+    if S.shape[0] < 3:
+        return TOLERANCE_FLOOR_MM
+    np.fill_diagonal(S, np.inf)
+    second = np.sort(S, axis=1)[:, 1]
+    return float(max(TOLERANCE_FLOOR_MM, TOLERANCE_FACTOR * np.median(second)))
+
+
+def _check_motion(spread: FloatArray, tolerance_mm: float) -> None:
+    """Raise a ReconstructionError for a trial that hardly moves: fewer than
+    ``MOVING_SHARE`` of the marker pairs vary by ``MOVING_TOLERANCES`` tolerances."""
+    M = spread.shape[0]
+    if M < 3:
+        return
+    i, j = np.triu_indices(M, 1)
+    share = float(np.mean(spread[i, j] > MOVING_TOLERANCES * tolerance_mm))
+    if share < MOVING_SHARE:
+        raise ReconstructionError(
+            f"the trial hardly moves: {100 * share:.0f} % of marker pairs change their "
+            f"distance by more than {MOVING_TOLERANCES * tolerance_mm:.0f} mm, every marker "
+            "looks rigid; learn from a trial in which the segments move through their range"
+        )
+
+
+def _least_varying(
+    lo: FloatArray, hi: FloatArray, owner: NDArray[np.intp], a: IntArray, b: IntArray,
+    keep: NDArray[np.bool_], apart: NDArray[np.bool_], min_links: int,
+) -> NDArray[np.bool_]:  # fmt: skip
+    """Extra links (pairs ``a, b``) giving each marker on no segment ``min_links`` links:
+    its least varying partners not yet linked (pairs never seen together excluded)."""
+    M = lo.shape[0]
+    extra = np.zeros(a.size, dtype=bool)
+    spread = hi[a, b] - lo[a, b]
+    usable = apart & np.isfinite(spread)
+    count = np.bincount(a[keep], minlength=M) + np.bincount(b[keep], minlength=M)
+    for m in np.flatnonzero((owner < 0) & (count < min_links)):
+        mine = np.flatnonzero(usable & ~keep & ~extra & ((a == m) | (b == m)))
+        mine = mine[np.argsort(spread[mine])][: min_links - count[m]]
+        extra[mine] = True
+        count[a[mine]] += 1
+        count[b[mine]] += 1
+    return extra
