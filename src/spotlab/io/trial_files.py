@@ -82,6 +82,8 @@ def labelled_markers(
         trial with no named marker seen.
     """
     names = _unique(trial.labels)
+    if not names:
+        raise FileFormatError(path, "the file holds no marker trajectories")
     F = trial.n_frames
     start, stop = (None, None) if frames is None else frames
     first = 0 if start is None else start
@@ -91,15 +93,18 @@ def labelled_markers(
             path, f"frames {first}:{last} are not a range of its {F} frames (0:{F})"
         )
     X = np.asarray(trial.points[first:last], dtype=np.float64)
-    seen = np.isfinite(X).all(axis=2)
+    seen: NDArray[np.bool_] = np.asarray(np.isfinite(X).all(axis=2))
     if markers is not None:
         index = {name: m for m, name in enumerate(names)}
         unknown = [name for name in markers if name not in index]
         if unknown:
-            shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
-            raise FileFormatError(path, f"no marker labelled {', '.join(unknown)} (it has {shown})")
+            raise FileFormatError(
+                path,
+                f"the trial lacks {len(unknown)} of the {len(markers)} markers asked for: "
+                f"{_some(unknown)} (it has {_some(names)})",
+            )
         if len(set(markers)) != len(markers):
-            raise FileFormatError(path, "--markers names a marker twice")
+            raise FileFormatError(path, f"a marker is named twice: {', '.join(markers)}")
         take = [index[name] for name in markers]
         absent = [names[m] for m in take if not seen[:, m].any()]
         if absent:
@@ -126,3 +131,8 @@ def _unique(labels: Sequence[str]) -> list[str]:
         count[name] = count.get(name, 0) + 1
         out.append(name if count[name] == 1 else f"{name}#{count[name]}")
     return out
+
+
+def _some(names: Sequence[str], n: int = 10) -> str:
+    """The first ``n`` names, comma-separated, with ``...`` for the rest."""
+    return ", ".join(names[:n]) + (f", ... ({len(names)} in all)" if len(names) > n else "")

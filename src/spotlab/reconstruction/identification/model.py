@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -27,26 +26,24 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial.distance import squareform
 
 from spotlab.core.errors import ReconstructionError
+from spotlab.reconstruction.identification.spreads import (
+    check_motion,
+    distance_range,
+    least_varying,
+    rigid_tolerance,
+)
 from spotlab.reconstruction.rigid import rigid_pose
 
-__all__ = ["Link", "MarkerModel", "Segment", "rigid_tolerance"]
+__all__ = ["Link", "MarkerModel", "Segment"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 #: Links a marker on no rigid cluster needs to be labelled by its links alone.
 MIN_LINKS = 3
-#: Chosen rigid tolerance: this many times the typical spread of a marker's second most
-#: rigid partner, and at least ``TOLERANCE_FLOOR_MM``.
-TOLERANCE_FACTOR = 2.0
-TOLERANCE_FLOOR_MM = 2.0
 #: Chosen link spread: this many rigid tolerances, and at least ``LINK_FLOOR_MM``.
 LINK_FACTOR = 5.0
 LINK_FLOOR_MM = 50.0
-#: A trial moves when at least this share of marker pairs varies by more than
-#: ``MOVING_TOLERANCES`` rigid tolerances.
-MOVING_SHARE = 0.25
-MOVING_TOLERANCES = 4.0
 
 
 @dataclass(frozen=True)
@@ -235,7 +232,7 @@ class MarkerModel:
             out.append(Segment(str(name), tuple(m), coords - coords.mean(axis=0)))
         links: list[Link] = []
         if link_spread_mm is not None:
-            lo, hi = _distance_range(X)
+            lo, hi = distance_range(X)
             owner = np.full(len(labels), -1)
             for s, seg in enumerate(out):
                 owner[list(seg.markers)] = s
@@ -243,7 +240,7 @@ class MarkerModel:
             apart = (owner[a] < 0) | (owner[a] != owner[b])
             keep = (hi[a, b] - lo[a, b] < link_spread_mm) & apart
             if min_links > 0:
-                keep |= _least_varying(lo, hi, owner, a, b, keep, apart, min_links)
+                keep |= least_varying(lo, hi, owner, a, b, keep, apart, min_links)
             links = [
                 Link(int(i), int(j), float(lo[i, j]), float(hi[i, j]))
                 for i, j in zip(a[keep], b[keep], strict=True)
@@ -300,13 +297,13 @@ class MarkerModel:
         """
         labels = tuple(str(x) for x in labels)
         X = _positions(positions, len(labels))
-        lo, hi = _distance_range(X)
+        lo, hi = distance_range(X)
         spread = np.nan_to_num(hi - lo, nan=1e9)
         np.fill_diagonal(spread, 0.0)
         spread = np.maximum(spread, spread.T)
         if tolerance_mm is None:
             tolerance_mm = rigid_tolerance(spread)
-            _check_motion(spread, tolerance_mm)
+            check_motion(spread, tolerance_mm)
         if link_spread_mm is None:
             link_spread_mm = max(LINK_FLOOR_MM, LINK_FACTOR * tolerance_mm)
             min_links = MIN_LINKS
@@ -421,91 +418,3 @@ def _spans_a_plane(X: FloatArray, min_mm: float = 10.0) -> bool:
     centred = complete[0] - complete[0].mean(axis=0)
     off_line = np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(centred.shape[0])
     return bool(off_line > min_mm)
-
-
-def _distance_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Smallest and largest distance (M, M) of every marker pair over the frames of ``X``
-    (F, M, 3) where both are present; NaN for pairs never seen together."""
-    lo = np.full(X.shape[1:2] * 2, np.inf)
-    hi = np.full(X.shape[1:2] * 2, -np.inf)
-    for start in range(0, X.shape[0], 256):  # (256, M, M) at a time
-        D = np.linalg.norm(X[start : start + 256, :, None] - X[start : start + 256, None], axis=-1)
-        D = np.where(np.isfinite(D), D, np.nan)
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pairs
-            lo = np.fmin(lo, np.nanmin(D, axis=0))
-            hi = np.fmax(hi, np.nanmax(D, axis=0))
-    never = ~np.isfinite(lo) | ~np.isfinite(hi)
-    return np.where(never, np.nan, lo), np.where(never, np.nan, hi)
-
-
-def rigid_tolerance(spread: FloatArray) -> float:
-    """The rigid tolerance (mm) of a trial from its distance spreads.
-
-    Parameters
-    ----------
-    spread : ndarray, shape (M, M)
-        Spread (max - min, mm) of the distance of every marker pair over the trial;
-        large for pairs never seen together.
-
-    Returns
-    -------
-    float
-        ``TOLERANCE_FACTOR`` (2) times the median over the markers of each marker's
-        second-smallest spread, and at least ``TOLERANCE_FLOOR_MM`` (2 mm).
-
-    Notes
-    -----
-    A marker of a cluster of three has two partners on its segment, so its
-    second-smallest spread is that of a pair on one segment: skin sliding over bone
-    and the lab's noise (a few mm for skin markers, ~0 for a rigid plate or the
-    simulator's truth). Pairs across a joint vary by tens to hundreds of mm as the
-    joint flexes. The median over the markers is the typical within-segment spread,
-    robust to the markers near joints or alone on their segment, whose second-smallest
-    spread is a cross-joint one. Twice that leaves room for frames the model never
-    saw (a range seen on part of a trial only grows on the rest) while staying well
-    below the cross-joint spreads; the floor keeps exactly rigid data (the
-    simulator's) at the tolerance its labelling was measured with.
-    """
-    S = np.array(spread, dtype=np.float64)
-    if S.shape[0] < 3:
-        return TOLERANCE_FLOOR_MM
-    np.fill_diagonal(S, np.inf)
-    second = np.sort(S, axis=1)[:, 1]
-    return float(max(TOLERANCE_FLOOR_MM, TOLERANCE_FACTOR * np.median(second)))
-
-
-def _check_motion(spread: FloatArray, tolerance_mm: float) -> None:
-    """Raise a ReconstructionError for a trial that hardly moves: fewer than
-    ``MOVING_SHARE`` of the marker pairs vary by ``MOVING_TOLERANCES`` tolerances."""
-    M = spread.shape[0]
-    if M < 3:
-        return
-    i, j = np.triu_indices(M, 1)
-    share = float(np.mean(spread[i, j] > MOVING_TOLERANCES * tolerance_mm))
-    if share < MOVING_SHARE:
-        raise ReconstructionError(
-            f"the trial hardly moves: {100 * share:.0f} % of marker pairs change their "
-            f"distance by more than {MOVING_TOLERANCES * tolerance_mm:.0f} mm, every marker "
-            "looks rigid; learn from a trial in which the segments move through their range"
-        )
-
-
-def _least_varying(
-    lo: FloatArray, hi: FloatArray, owner: NDArray[np.intp], a: IntArray, b: IntArray,
-    keep: NDArray[np.bool_], apart: NDArray[np.bool_], min_links: int,
-) -> NDArray[np.bool_]:  # fmt: skip
-    """Extra links (pairs ``a, b``) giving each marker on no segment ``min_links`` links:
-    its least varying partners not yet linked (pairs never seen together excluded)."""
-    M = lo.shape[0]
-    extra = np.zeros(a.size, dtype=bool)
-    spread = hi[a, b] - lo[a, b]
-    usable = apart & np.isfinite(spread)
-    count = np.bincount(a[keep], minlength=M) + np.bincount(b[keep], minlength=M)
-    for m in np.flatnonzero((owner < 0) & (count < min_links)):
-        mine = np.flatnonzero(usable & ~keep & ~extra & ((a == m) | (b == m)))
-        mine = mine[np.argsort(spread[mine])][: min_links - count[m]]
-        extra[mine] = True
-        count[a[mine]] += 1
-        count[b[mine]] += 1
-    return extra
