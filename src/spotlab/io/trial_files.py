@@ -63,7 +63,9 @@ def labelled_markers(
         The trial's file, named in errors.
     markers : sequence of str, optional
         Labels to take, in this order. Default: every named marker (not ``*12`` or
-        empty) seen in at least half of the chosen frames that show any marker.
+        empty, not a model output the C3D file lists as an angle, force, moment, power,
+        scalar or modelled marker) seen in at least half of the chosen frames that show
+        any marker.
         A label repeated in the file is told apart as ``NAME#2``, ``NAME#3``...
     frames : (start, stop), optional
         Frames ``start`` to ``stop - 1``, counted from 0 at the file's first frame;
@@ -112,8 +114,11 @@ def labelled_markers(
     else:
         active = seen.any(axis=1)
         share = seen[active].mean(axis=0) if active.any() else np.zeros(len(names))
+        not_markers = trial.metadata.get("point_kinds", {})
         take = [
-            m for m, name in enumerate(names) if not _UNNAMED.match(name) and share[m] >= MIN_SHARE
+            m
+            for m, name in enumerate(names)
+            if not _UNNAMED.match(name) and name not in not_markers and share[m] >= MIN_SHARE
         ]
         if not take:
             raise FileFormatError(
