@@ -41,6 +41,9 @@ IntArray = NDArray[np.intp]
 
 #: Links a marker on no rigid cluster needs to be labelled by its links alone.
 MIN_LINKS = 3
+#: A pair's spread counts (1 + length / this) times when clusters are formed: a long
+#: pair that varies a little more likely crosses a joint the trial hardly moved.
+LENGTH_SCALE_MM = 500.0
 #: Chosen link spread: this many rigid tolerances, and at least ``LINK_FLOOR_MM``.
 LINK_FACTOR = 5.0
 LINK_FLOOR_MM = 50.0
@@ -259,10 +262,15 @@ class MarkerModel:
         """Find the rigid clusters themselves: markers whose distances stay constant.
 
         Two markers are rigidly linked when the spread (max - min) of their distance
-        over the frames where both are seen is below ``tolerance_mm``; a segment is a
+        over the frames where both are seen, weighted by ``1 + length / 500 mm`` (length:
+        their largest distance), is below ``tolerance_mm``; a segment is a
         group of 3 or more in which every pair is linked (complete-linkage clustering of
         the spreads, cut at ``tolerance_mm``), so markers near a joint, linked to both
-        neighbours, do not join two segments into one. Pairs whose distance varies by
+        neighbours, do not join two segments into one. The length weight keeps apart
+        far markers whose distance a trial hardly changed (the head and the sacrum in
+        the first strides of a walk: they are not one rigid body, and out of sample
+        their distance varies with the trunk's flexion, in proportion to their length);
+        exactly rigid markers (spread 0) are not affected. Pairs whose distance varies by
         less than ``link_spread_mm`` become links (see :meth:`from_trajectories`) and
         markers on no cluster of 3 are labelled by them; a group on a line (its rotation
         about the line unknown) is no segment either.
@@ -309,7 +317,10 @@ class MarkerModel:
             min_links = MIN_LINKS
         else:
             min_links = 0
-        tree = linkage(squareform(spread, checks=False), "complete")
+        length = np.nan_to_num(np.maximum(hi, hi.T), nan=0.0)
+        np.fill_diagonal(length, 0.0)
+        weighted = spread * (1.0 + length / LENGTH_SCALE_MM)
+        tree = linkage(squareform(weighted, checks=False), "complete")
         group = fcluster(tree, tolerance_mm, criterion="distance") - 1
         groups = [[labels[m] for m in np.flatnonzero(group == g)] for g in np.unique(group)]
         small = [g for g in groups if len(g) < 3]
