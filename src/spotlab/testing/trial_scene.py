@@ -73,9 +73,12 @@ def place_in_volume(points: FloatArray) -> FloatArray:
         z, shifted to the middle of the volume and onto the floor (mm).
     """
     X = np.asarray(points, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
-        spread = np.nanmax(X, axis=1) - np.nanmin(X, axis=1)  # (F, 3)
-    up = int(np.nanargmax(np.nanmedian(spread, axis=0)))
+    present: NDArray[np.bool_] = np.asarray(np.isfinite(X).all(axis=2))
+    seen = np.asarray(present.any(axis=1))
+    if not seen.any():
+        raise ValueError("no marker is seen in any frame")
+    spread = np.nanmax(X[seen], axis=1) - np.nanmin(X[seen], axis=1)  # (F', 3)
+    up = int(np.argmax(np.nanmedian(spread, axis=0)))
     X = np.roll(X, 2 - up, axis=2)  # cyclic: keeps the handedness
     centre = np.nanmean(X.reshape(-1, 3), axis=0)
     floor = np.nanmin(X[..., 2])

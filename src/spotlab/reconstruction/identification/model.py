@@ -149,9 +149,15 @@ class MarkerModel:
 
     @cached_property
     def intervals(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
-        """Every constrained pair ``(i, j, min mm, max mm)``: segment pairs (min = max,
-        their model distance), then links."""
+        """Every constrained pair ``(i, j, min mm, max mm)``: segment pairs, then links.
+
+        A segment pair's range is its model distance, widened by half the rigid
+        tolerance the clusters were found with (:attr:`tolerance_mm`, when inferred):
+        the pairs of a cluster varied by less than that tolerance, around their mean, so
+        skin markers keep their labels through the skin motion the model was learnt
+        with. Segments given by name (no tolerance) have min = max."""
         i, j, d = self.pairs()
+        w = 0.0 if self.tolerance_mm is None else self.tolerance_mm / 2
         a = np.array([k.a for k in self.links], dtype=np.intp)
         b = np.array([k.b for k in self.links], dtype=np.intp)
         lo = np.array([k.min_mm for k in self.links], dtype=np.float64)
@@ -159,8 +165,8 @@ class MarkerModel:
         return (
             np.concatenate([i, a]),
             np.concatenate([j, b]),
-            np.concatenate([d, lo]),
-            np.concatenate([d, hi]),
+            np.concatenate([np.maximum(d - w, 0.0), lo]),
+            np.concatenate([d + w, hi]),
         )
 
     def pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
