@@ -33,9 +33,7 @@ from spotlab.console.trajectories import (
     reconstruct_file,
     write_trial,
 )
-from spotlab.io import Trial, read_c3d, read_trc
-
-TRIAL_READERS = {".c3d": read_c3d, ".trc": read_trc}
+from spotlab.io import TRIAL_READERS, Trial
 
 
 def add_parser(sub: Any) -> None:

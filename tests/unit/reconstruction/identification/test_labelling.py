@@ -41,7 +41,7 @@ def test_a_loose_marker_without_links_is_refused() -> None:
     X = np.zeros((20, 2, 3))
     X[:, 1, 0] = 100.0
     with pytest.raises(ReconstructionError, match="no rigid cluster of 3"):
-        MarkerModel.infer(["A", "B"], X)
+        MarkerModel.infer(["A", "B"], X, tolerance_mm=2.0, link_spread_mm=0.0)
     with pytest.raises(ReconstructionError, match="fewer than 3 distance links: A, B"):
         MarkerModel.infer(["A", "B"], X, link_spread_mm=50.0)
 
@@ -50,8 +50,8 @@ def test_markers_on_a_line_make_no_segment() -> None:
     X = np.zeros((5, 4, 3))
     X[:, :, 0] = [0.0, 100.0, 250.0, 400.0]  # rigid, but on a line
     with pytest.raises(ReconstructionError, match="on a line"):
-        MarkerModel.infer(list("ABCD"), X)
-    model = MarkerModel.infer(list("ABCD"), X, link_spread_mm=50.0)
+        MarkerModel.infer(list("ABCD"), X, tolerance_mm=2.0, link_spread_mm=0.0)
+    model = MarkerModel.infer(list("ABCD"), X, tolerance_mm=2.0, link_spread_mm=50.0)
     assert model.segments == () and len(model.links) == 6
 
 
