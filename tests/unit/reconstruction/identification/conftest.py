@@ -26,6 +26,4 @@ def model() -> MarkerModel:
     """Clusters and links of the same subject (seed 3), learnt from other frames of its walk
     (1.2-3 s; the scenes the tests label end at 1 s): each seed is another subject."""
     training = centroid_scene(3.0, 100.0, seed=3)
-    return MarkerModel.infer(
-        training.labels, training.markers_mm[120:], tolerance_mm=15.0, link_spread_mm=50.0
-    )
+    return MarkerModel.infer(training.labels, training.markers_mm[120:])
