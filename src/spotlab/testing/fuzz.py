@@ -173,12 +173,14 @@ def _stream_run(
     def make_run(folder: Path, corpus: list[bytes]) -> Callable[[bytes, random.Random], None]:
         import json
 
-        from spotlab.console.decoding import decoder_for
+        from spotlab.drivers.centroid import decoder_from_metadata as centroid_decoder
+        from spotlab.drivers.timer import decoder_from_metadata as timer_decoder
 
         meta = json.loads((folder / f"{driver}.meta.json").read_text())
+        decoder_for = timer_decoder if driver == "timer" else centroid_decoder
 
         def run(data: bytes, rng: random.Random) -> None:
-            decoder = decoder_for(meta)
+            decoder: Any = decoder_for(meta)
             pos = 0
             t = 0
             while pos < len(data):
@@ -186,9 +188,7 @@ def _stream_run(
                 t += 1_000_000
                 decoder.feed(data[pos : pos + step], t)
                 pos += step
-            flush = getattr(decoder, "flush", None)  # the MCS-1 decoders have one
-            if callable(flush):
-                flush()
+            decoder.flush()
 
         return run
 
