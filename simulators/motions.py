@@ -10,6 +10,7 @@ the device reports it as not seen.
 
 from __future__ import annotations
 
+import struct
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -394,17 +395,21 @@ def from_c3d(path: str | Path, *, center: bool = True, loop: bool = True) -> Sam
     Raises
     ------
     ValueError
-        If the file holds no 3-D points.
+        If the file is not a readable C3D file or holds no 3-D points.
     """
     import c3d  # optional dependency: spotlab[c3d]
 
     with open(path, "rb") as fh:
-        reader = c3d.Reader(fh)
-        rate = float(reader.point_rate)
-        labels = [str(s).strip() for s in reader.point_labels]
-        units = reader.get("POINT:UNITS")
-        unit = units.string_value.strip().lower() if units is not None else "mm"
-        frames = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=True)]
+        try:
+            reader = c3d.Reader(fh)
+            rate = float(reader.point_rate)
+            labels = [str(s).strip() for s in reader.point_labels]
+            units = reader.get("POINT:UNITS")
+            unit = units.string_value.strip().lower() if units is not None else "mm"
+            frames = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=True)]
+        except (struct.error, ValueError, KeyError, IndexError, AttributeError) as exc:
+            # What the c3d package raises on bytes that are not a C3D file.
+            raise ValueError(f"{path}: not a readable C3D file ({exc})") from None
     if not frames or frames[0].shape[0] == 0:
         raise ValueError(f"{path}: no 3-D points in this C3D file")
     data = np.stack(frames).astype(np.float64)

@@ -19,7 +19,6 @@ from spotlab.console.errors import (
     CommandError,
     report,
 )
-from spotlab.core.errors import SpotlabError
 
 # Modules of spotlab.console.commands, each with add_parser(subparsers) and run(args),
 # with the one-line help ``spotlab --help`` shows for them. Only the module of the
@@ -81,6 +80,14 @@ def build_parser(command: str | None = "*") -> argparse.ArgumentParser:
     return parser
 
 
+def _spotlab_error() -> type[Exception]:
+    """spotlab's error base class, imported only when an error is being matched (it
+    brings numpy, which ``spotlab --version`` and ``--help`` do without)."""
+    from spotlab.core.errors import SpotlabError
+
+    return SpotlabError
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -88,13 +95,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser(_command_of(argv))
         args = parser.parse_args(argv)
         code = args.run(args)
+    except SystemExit:  # --help, --version and usage errors: argparse has spoken
+        raise
     except KeyboardInterrupt:
         report("interrupted")
         return EXIT_INTERRUPTED
     except CommandError as exc:
         report(str(exc))
         return exc.exit_code
-    except SpotlabError as exc:
+    except _spotlab_error() as exc:
         report(str(exc))
         return EXIT_FAILURE
     except BrokenPipeError:

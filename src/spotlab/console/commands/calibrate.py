@@ -22,6 +22,7 @@ from spotlab.console.calibration_inputs import (
     load_recordings,
 )
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_paths
 
 
 def add_parser(sub: Any) -> None:
@@ -75,6 +76,10 @@ def _load(args: argparse.Namespace) -> WandObservations:
 
 
 def run(args: argparse.Namespace) -> int:
+    out: Path = args.out
+    report_path = args.report or out.with_suffix(".report.json")
+    figure_path = args.figure or out.with_suffix(".report.png")
+    check_output_paths([("--out", out), ("--report", report_path), ("--figure", figure_path)])
     obs = _load(args)
     length = args.wand_length if args.wand_length is not None else obs.wand_length
     if length is None:
@@ -95,9 +100,6 @@ def run(args: argparse.Namespace) -> int:
         distortion=() if args.no_distortion else ("k1", "k2", "p1", "p2", "k3"),
         progress=progress,
     )
-    out: Path = args.out
-    report_path = args.report or out.with_suffix(".report.json")
-    figure_path = args.figure or out.with_suffix(".report.png")
     result.rig.save(out)
     report_path.write_text(json.dumps(result.report, indent=2) + "\n")
     write_report_figure(

@@ -21,6 +21,7 @@ from spotlab.acquisition.replay import replay, summarize
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_dir
 from spotlab.console.progress import Progress
 from spotlab.console.trajectories import reconstruct_file, write_trial
 from spotlab.drivers.selspot import SelspotDriver
@@ -76,6 +77,7 @@ def _reconstruct(journal: Path, rig: Path, truth: Path, c3d: Path) -> dict[str, 
 def run(args: argparse.Namespace) -> int:
     if not args.seconds >= 1.0:
         raise CommandError("--seconds must be at least 1 for the demo")
+    check_output_dir("--out", args.out)
     args.out.mkdir(parents=True, exist_ok=True)
     journal = args.out / "demo.spj"
     truth = args.out / "truth.csv"

@@ -10,10 +10,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_dir, check_output_paths
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
-from spotlab.simulators.motions import MOTIONS
+from spotlab.simulators.faults import parse_schedule
+from spotlab.simulators.lab import lab_dir
+from spotlab.simulators.motions import MOTIONS, from_c3d
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -240,7 +243,32 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     return options
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """Refuse what would fail once the device serves: bad output paths, lab folder,
+    fault schedule or motion file (a failure in the serving thread is no clear error)."""
+    check_output_paths(
+        [
+            ("--truth", args.truth),
+            ("--fault-log", args.fault_log),
+            ("--rig-out", args.rig_out),
+            ("--model-out", getattr(args, "model_out", None)),
+        ]
+    )
+    check_output_dir("--lab" if args.lab is not None else "lab folder", lab_dir(args.lab))
+    try:
+        parse_schedule(args.faults)
+    except ValueError as exc:
+        raise CommandError(f"--faults: {exc}") from None
+    motion = str(args.motion)
+    if args.family == "selspot" and motion not in MOTIONS and Path(motion).is_file():
+        try:
+            from_c3d(motion)
+        except ValueError as exc:
+            raise CommandError(f"--motion: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
+    check_args(args)
     if args.family == "centroid":
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
