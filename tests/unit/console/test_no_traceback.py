@@ -89,7 +89,7 @@ CASES: list[Case] = [
                 str(f["dir"] / "rig_out.toml"),
                 flag,
                 str(f["plain"] / name),
-            ],  # fmt: skip
+            ],
             (flag, "is a file"),
         )
         for flag, name in (("--out", "x.toml"), ("--report", "r.json"), ("--figure", "f.png"))
@@ -102,7 +102,7 @@ CASES: list[Case] = [
                 str(f["dir"] / "rec.spj"),
                 flag,
                 str(f["plain"] / name),
-            ],  # fmt: skip
+            ],
             (flag, "is a file"),
         )
         for flag, name in (
@@ -126,7 +126,7 @@ CASES: list[Case] = [
             str(f["rig"]),
             "--out",
             str(f["plain"] / "x.c3d"),
-        ],  # fmt: skip
+        ],
         ("--out", "is a file"),
     ),
     (
@@ -139,7 +139,7 @@ CASES: list[Case] = [
             "1",
             "--out",
             str(f["plain"] / "x.spj"),
-        ],  # fmt: skip
+        ],
         ("--out", "is a file"),
     ),
     *[
@@ -152,7 +152,7 @@ CASES: list[Case] = [
                 str(f["plain"] / "x"),
                 "--seconds",
                 "0.1",
-            ],  # fmt: skip
+            ],
             (flag, "is a file"),
         )
         for family in ("selspot", "timer", "centroid")
@@ -195,7 +195,7 @@ CASES: list[Case] = [
             str(f["rig"]),
             "--out",
             str(f["dir"] / "x.c3d"),
-        ],  # fmt: skip
+        ],
         ("'uv'", "python objects"),
     ),
     (
@@ -212,7 +212,7 @@ CASES: list[Case] = [
             str(f["rig"]),
             "--out",
             str(f["dir"] / "x.c3d"),
-        ],  # fmt: skip
+        ],
         ("'rate'", "numbers"),
     ),
     # usage errors: one prefix, the subcommand named once
@@ -326,7 +326,7 @@ def test_ctrl_c_at_start_up(command: list[str], delay_s: float, tmp_path: Path) 
     time.sleep(delay_s)
     proc.send_signal(signal.SIGINT)
     try:
-        out, err = proc.communicate(timeout=60)
+        _out, err = proc.communicate(timeout=60)
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.communicate()
