@@ -295,6 +295,23 @@ def test_subcommand_help_lines_match_the_listing() -> None:
     assert shown == COMMANDS
 
 
+def test_every_option_has_help() -> None:
+    """Every option and positional of every subcommand says what it is for."""
+    parser = build_parser("*")
+    sub = next(a for a in parser._actions if a.dest == "command")
+    missing = []
+    for name, command in sub.choices.items():
+        parsers = [(name, command)]
+        for action in command._actions:
+            if action.choices and isinstance(action.choices, dict):  # nested (udev ACTION)
+                parsers += [(f"{name} {k}", p) for k, p in action.choices.items()]
+        for label, p in parsers:
+            for action in p._actions:
+                if not action.help and action.dest != "help":
+                    missing.append(f"{label} {'/'.join(action.option_strings) or action.dest}")
+    assert missing == []
+
+
 def test_version_imports_no_subcommand_and_no_numpy() -> None:
     code = (
         "import sys\n"

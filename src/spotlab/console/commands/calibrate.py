@@ -42,9 +42,26 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--wand-length", type=float, help="wand length in mm (or in the npz)")
     p.add_argument("--frame", type=Path, help="reference-object CSV table (CSV input)")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), help="pixels")
-    p.add_argument("--wand-markers", type=int, nargs=2, metavar=("A", "B"))
-    p.add_argument("--frame-recording", type=Path)
-    p.add_argument("--frame-markers", type=int, nargs="+")
+    p.add_argument(
+        "--wand-markers",
+        type=int,
+        nargs=2,
+        metavar=("A", "B"),
+        help="marker numbers of the wand's two ends in the recording (.spj input)",
+    )
+    p.add_argument(
+        "--frame-recording",
+        type=Path,
+        metavar="STATIC.spj",
+        help="static recording of the reference object (L-frame) (.spj input)",
+    )
+    p.add_argument(
+        "--frame-markers",
+        type=int,
+        nargs="+",
+        metavar="N",
+        help="marker numbers of the reference object, in the order of --frame-points",
+    )
     p.add_argument("--frame-points", type=Path, help="CSV with X, Y, Z (mm) per frame marker")
     p.add_argument("--report", type=Path, help="quality report (JSON); default OUT.report.json")
     p.add_argument("--figure", type=Path, help="quality figure (PNG); default OUT.report.png")

@@ -58,9 +58,28 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
     p.add_argument("--faults", default="", help="fault schedule, e.g. 'bitflip@1.5,drop@2,reset@6'")
     p.add_argument("--fault-log", type=Path, help="write what was injected as JSON")
-    p.add_argument("--clock-offset", type=float, default=0.0, metavar="SECONDS")
-    p.add_argument("--clock-drift-ppm", type=float, default=0.0, metavar="PPM")
-    p.add_argument("--clock-jitter", type=float, default=0.0, metavar="SECONDS")
+    p.add_argument(
+        "--clock-offset",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="the device counter reads this many seconds at power-up (default 0)",
+    )
+    p.add_argument(
+        "--clock-drift-ppm",
+        type=float,
+        default=0.0,
+        metavar="PPM",
+        help="the device oscillator's error in parts per million, positive runs fast (default 0)",
+    )
+    p.add_argument(
+        "--clock-jitter",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="RMS scatter (s) of the instant a frame is taken around the time its timestamp "
+        "names (default 0)",
+    )
     p.add_argument(
         "--clock-step",
         action="append",
