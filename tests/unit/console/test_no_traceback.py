@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from spotlab.console.cli import COMMANDS, build_parser, main
+from spotlab.console.commands.sim import centroid_options_from_args
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.rigs import ring_rig
 
@@ -180,6 +181,16 @@ CASES: list[Case] = [
     ),
     ("sim--motion-missing", lambda f: ["sim", "selspot", "--motion", "nope"], ("nope",)),
     ("sim--clock-step", lambda f: ["sim", "selspot", "--clock-step", "x"], ("--clock-step",)),
+    (
+        "sim--camera-off-0",
+        lambda f: ["sim", "centroid", "--camera-off", "0@1:1"],
+        ("--camera-off", "numbered 1 to 8"),
+    ),
+    (
+        "sim--sunlight-9",
+        lambda f: ["sim", "centroid", "--cameras", "4", "--sunlight", "5@1:1"],
+        ("--sunlight", "numbered 1 to 4"),
+    ),
     # bad npz contents
     (
         "calibrate-string-array",
@@ -284,6 +295,17 @@ def test_any_clock_step_is_taken_or_refused_in_one_line(
     _one_error(
         ["sim", "selspot", "--clock-step", text, "--leds", "0", "--lab", str(tmp_path)], capsys
     )
+
+
+def test_sim_cameras_count_from_1_on_the_command_line() -> None:
+    """``--sunlight`` / ``--camera-off`` take CAM from 1, as calibrate and reconstruct."""
+    args = build_parser("sim").parse_args(
+        ["sim", "centroid", "--cameras", "4", "--sunlight", "0.5:1", "--sunlight", "4@1:2",
+         "--camera-off", "1@0.2:0.3"]
+    )  # fmt: skip
+    options = centroid_options_from_args(args)
+    assert options.sunlight == "0@0.5:1,3@1:2"
+    assert options.camera_off == "0@0.2:0.3"
 
 
 def test_subcommand_help_lines_match_the_listing() -> None:

@@ -150,11 +150,12 @@ def add_parser(sub: Any) -> None:
     cen.add_argument("--noise-blobs", type=float, default=0.02, help="noise blobs per image")
     cen.add_argument(
         "--sunlight", action="append", default=[], metavar="[CAM@]AT:DURATION",
-        help="camera CAM (default 0) sees thousands of blobs from AT s after START:; repeat",
+        help="camera CAM (1 to --cameras, default 1) sees thousands of blobs from AT s "
+        "after START:; repeat",
     )  # fmt: skip
     cen.add_argument(
         "--camera-off", action="append", default=[], metavar="CAM@AT:DURATION",
-        help="camera CAM delivers no frames from AT s after START:; repeat",
+        help="camera CAM (1 to --cameras) delivers no frames from AT s after START:; repeat",
     )  # fmt: skip
     cen.add_argument("--no-occlusion", action="store_true", help="body segments hide nothing")
     cen.add_argument(
@@ -243,16 +244,38 @@ def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions
     return options
 
 
+def _episodes(items: list[str], option: str, cameras: int, *, default_camera: bool) -> str:
+    """``[CAM@]AT:DURATION`` options, cameras counted from 1 as everywhere on the command
+    line, as the simulator's ``CAM@AT:DURATION`` list (cameras counted from 0)."""
+    out = []
+    for item in items:
+        cam, sep, rest = item.partition("@")
+        if not sep:
+            if not default_camera:
+                raise CommandError(f"{option} {item!r}: expected CAM@AT:DURATION")
+            cam, rest = "1", item
+        try:
+            number = int(cam)
+        except ValueError:
+            raise CommandError(f"{option} {item!r}: CAM must be a camera number") from None
+        if not 1 <= number <= cameras:
+            raise CommandError(f"{option} {item!r}: cameras are numbered 1 to {cameras}")
+        out.append(f"{number - 1}@{rest}")
+    return ",".join(out)
+
+
 def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     """Video-centroid simulator options from parsed command-line arguments."""
-    sun = [item if "@" in item else f"0@{item}" for item in args.sunlight]
+    cameras = 8 if args.cameras is None else args.cameras
+    sun = _episodes(args.sunlight, "--sunlight", cameras, default_camera=True)
+    off = _episodes(args.camera_off, "--camera-off", cameras, default_camera=False)
     options = CentroidSimOptions(
-        cameras=8 if args.cameras is None else args.cameras, markers=args.markers,
+        cameras=cameras, markers=args.markers,
         rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
         rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
-        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=",".join(sun),
-        camera_off=",".join(args.camera_off), occlusion=0 if args.no_occlusion else 1,
+        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=sun,
+        camera_off=off, occlusion=0 if args.no_occlusion else 1,
         lab_name=args.lab_name or "centroid", lab=args.lab,
     )  # fmt: skip
     try:
