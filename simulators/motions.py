@@ -11,6 +11,7 @@ the device reports it as not seen.
 from __future__ import annotations
 
 import struct
+import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -399,7 +400,8 @@ def from_c3d(path: str | Path, *, center: bool = True, loop: bool = True) -> Sam
     """
     import c3d  # optional dependency: spotlab[c3d]
 
-    with open(path, "rb") as fh:
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the c3d package's notes about the file's layout
         try:
             reader = c3d.Reader(fh)
             rate = float(reader.point_rate)
