@@ -80,6 +80,15 @@ def build_parser(command: str | None = "*") -> argparse.ArgumentParser:
     return parser
 
 
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The parser of subcommand ``command`` (``parser`` itself if there is none)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            found: argparse.ArgumentParser = action.choices.get(command, parser)
+            return found
+    return parser
+
+
 def _spotlab_error() -> type[Exception]:
     """spotlab's error base class, imported only when an error is being matched (it
     brings numpy, which ``spotlab --version`` and ``--help`` do without)."""
@@ -93,7 +102,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         parser = build_parser(_command_of(argv))
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # named by the subcommand that was given them
+            _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extra)}")
         code = args.run(args)
     except SystemExit:  # --help, --version and usage errors: argparse has spoken
         raise

@@ -233,7 +233,8 @@ CASES: list[Case] = [
     ("info-missing", lambda f: ["info", str(f["dir"] / "missing.spj")], ("missing.spj",)),
     ("info-plain", lambda f: ["info", str(f["plain"])], ("plain.txt",)),
     ("udev-bad", lambda f: ["udev", "--nonsense"], ("udev:",)),
-    ("devices-bad", lambda f: ["devices", "--nonsense"], ("--nonsense",)),
+    ("devices-bad", lambda f: ["devices", "--nonsense"], ("devices:", "--nonsense")),
+    ("info-extra", lambda f: ["info", str(f["plain"]), "extra"], ("info:", "extra")),
 ]
 
 
