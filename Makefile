@@ -45,9 +45,12 @@ bench-gcvspline: $(STAMP)
 	$(BIN)/python -m pip install --quiet gcvspline==0.5 \
 		--build-constraint $(VENV)/gcvspline-build-constraint.txt
 
-# One million mutated inputs through every SPX decoder path (about 20 minutes on 2 cores).
+# One million mutated inputs through every SPX decoder path (about 20 minutes on 2 cores),
+# then one million through each other decoder and reader (TMR, CEN, journal, C3D, TRC,
+# rig TOML, marker-model JSON: several hours on 2 cores).
 fuzz: $(STAMP)
 	$(BIN)/python benchmarks/fuzz_selspot.py --inputs 1000000 --workers 2
+	$(BIN)/python benchmarks/fuzz_all.py --inputs 1000000 --workers 2 --failure-dir fuzz-failures
 
 clean:
 	rm -rf $(VENV) build *.egg-info .mypy_cache .ruff_cache

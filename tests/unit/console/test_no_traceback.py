@@ -226,6 +226,18 @@ CASES: list[Case] = [
         ],
         ("'rate'", "numbers"),
     ),
+    (
+        "model-learn--out",
+        lambda f: ["model", "learn", str(f["garbage_c3d"]), "--out", str(f["plain"] / "m.json")],
+        ("--out", "is a file"),
+    ),
+    (
+        "model-learn-garbage",
+        lambda f: ["model", "learn", str(f["garbage_c3d"]), "--out", str(f["dir"] / "m.json")],
+        ("garbage.c3d",),
+    ),
+    ("model-show-plain", lambda f: ["model", "show", str(f["plain"])], ("plain.txt",)),
+    ("model-usage", lambda f: ["model", "learn"], ("model learn:",)),
     # usage errors: one prefix, the subcommand named once
     ("record-usage", lambda f: ["record"], ("record:", "--seconds")),
     ("export-usage", lambda f: ["export"], ("export:",)),

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
 from spotlab.console.paths import check_output_dir, check_output_paths
+from spotlab.io import FileFormatError
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
@@ -305,7 +306,7 @@ def check_args(args: argparse.Namespace) -> None:
     if args.family == "selspot" and motion not in MOTIONS and Path(motion).is_file():
         try:
             from_c3d(motion)
-        except ValueError as exc:
+        except (ValueError, FileFormatError) as exc:
             raise CommandError(f"--motion: {exc}") from None
 
 
