@@ -11,7 +11,8 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "spotlab needs Python 3.11 or newer"'
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,lsl,oak]'
+	@# PYTHONWARNINGS: setuptools' build backend warns about every editable install
+	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,lsl,oak]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -33,7 +34,7 @@ unit: $(STAMP)
 test: lint typecheck layers unit
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
+	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,bench]'
 	$(BIN)/python benchmarks/run_all.py
 
 # The gcvspline peer of benchmarks/spline_gcv.py: an sdist built with numpy.distutils,

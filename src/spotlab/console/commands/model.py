@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from spotlab.console.errors import EXIT_USAGE, CommandError
+from spotlab.console.paths import check_output_paths
 from spotlab.core.errors import ReconstructionError
 from spotlab.io import labelled_markers, read_trial
 from spotlab.reconstruction.identification import MarkerModel, model_fit
@@ -33,7 +34,7 @@ def add_parser(sub: Any) -> None:
         help="learn, show or check a marker model for identification",
         description="Marker models (rigid clusters and distance links) for labelling markers.",
     )
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    actions = p.add_subparsers(dest="action", metavar="ACTION", help="learn, show or check")
     actions.required = True
 
     learn = actions.add_parser(
@@ -108,6 +109,7 @@ def parse_frames(text: str | None) -> tuple[int | None, int | None] | None:
 def run_learn(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() != ".json":
         raise CommandError(f"--out {args.out}: the model file name must end in .json", EXIT_USAGE)
+    check_output_paths([("--out", args.out)])
     for flag, value in (("--tolerance", args.tolerance), ("--link-spread", args.link_spread)):
         if value is not None and not value > 0:
             raise CommandError(f"{flag} must be positive (mm), not {value:g}", EXIT_USAGE)
