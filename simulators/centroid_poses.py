@@ -1,0 +1,103 @@
+"""The simulated body standing still and moving every joint (``sim centroid --motion``).
+
+A new subject's first labels come from a static trial and a range-of-motion (ROM) trial
+(``spotlab model init`` / ``learn``). :class:`PosedBody` is the 40-marker body of
+:class:`~spotlab.simulators.centroid_body.GaitBody` — the same subject for the same
+seed: size, marker placement, soft tissue — in two motions besides the walk:
+
+* ``static``: standing in a neutral pose (legs straight, arms hanging slightly away
+  from the trunk) on a spot and with a heading drawn from the seed, swaying a few mm;
+* ``rom``: on the same spot, turning slowly on the spot while every joint of the body
+  moves through a range wider than the walk's (hip flexion -0.45 to 0.75 rad and
+  abduction to 0.4 rad, knee flexion to 1.3 rad, foot pitch +-0.45 rad, shoulder
+  flexion -0.6 to 1.2 rad and abduction to 1.2 rad, elbow flexion 0.1 to 1.5 rad) and
+  the pelvis goes down to 930 mm (the walk's 935-965 mm, a crouch on this body's
+  960 mm legs: feet pressed into the floor stay on it, as in the walk).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spotlab.simulators.centroid_body import F64, GaitBody
+from spotlab.simulators.motions import body_pose
+
+__all__ = ["BODY_MOTIONS", "STANDING_PELVIS_MM", "PosedBody", "body_for"]
+
+#: Motions of the body: the walk of :class:`GaitBody`, then the two of :class:`PosedBody`.
+BODY_MOTIONS = ("walk", "static", "rom")
+#: Pelvis height standing with straight legs (mm): ankles 60 mm above the floor.
+STANDING_PELVIS_MM = 1020.0
+
+
+class PosedBody(GaitBody):
+    """Subject ``seed``'s body standing still (``static``) or in a ROM trial (``rom``).
+
+    Parameters
+    ----------
+    motion : {"static", "rom"}
+    seed : int
+        The subject (as :meth:`GaitBody.for_seed`); its spot within 400 mm of the
+        volume's centre and its heading come from the seed too.
+    heading_rad, spot_mm : optional
+        Override the seeded heading (rad, 0 = facing +x) and spot (x, y mm).
+    """
+
+    def __init__(
+        self,
+        motion: str,
+        seed: int = 0,
+        *,
+        heading_rad: float | None = None,
+        spot_mm: tuple[float, float] | None = None,
+    ) -> None:
+        if motion not in BODY_MOTIONS[1:]:
+            raise ValueError(f"motion {motion!r}: expected one of {', '.join(BODY_MOTIONS[1:])}")
+        walker = GaitBody.for_seed(seed)
+        super().__init__(subject=walker.subject)
+        self.motion = motion
+        rng = np.random.default_rng(np.random.SeedSequence([seed, 0x5747]))
+        heading, spot = float(rng.uniform(0, 2 * np.pi)), rng.uniform(-400, 400, 2)
+        self.heading = heading if heading_rad is None else float(heading_rad)
+        self.spot = np.asarray(spot if spot_mm is None else spot_mm, dtype=np.float64)
+
+    def all_markers(self, t: F64) -> F64:
+        """All 40 markers at times (K,) s -> (K, 40, 3) mm."""
+        t = np.asarray(t, dtype=np.float64)
+        w = 2 * np.pi * t[:, None]
+        side = np.array([0.0, np.pi])  # left, right out of phase
+        if self.motion == "static":
+            sway = np.stack([4 * np.sin(2 * np.pi * 0.23 * t + 0.3),
+                             3 * np.sin(2 * np.pi * 0.17 * t + 1.1)], 1)  # fmt: skip
+            heading = self.heading + 0.01 * np.sin(2 * np.pi * 0.11 * t)
+            pel_z = STANDING_PELVIS_MM - 2 + 2 * np.cos(2 * np.pi * 0.3 * t)
+            ones = np.ones((t.size, 2))
+            hip, knee, foot, arm = 0.02 * ones, 0.04 * ones, 0.0 * ones, 0.05 * ones
+            g = body_pose(self.spot + sway, _unit(heading), pel_z, hip, knee, foot, arm,
+                          elbow=0.15, arm_abd=0.12)  # fmt: skip
+        else:
+            heading = self.heading + 2 * np.pi * 0.08 * t
+            pel_z = 985.0 - 55.0 * np.cos(2 * np.pi * 0.2 * t)
+            hip = 0.15 + 0.6 * np.sin(w * 0.35 + side)
+            knee = 0.65 * (1 - np.cos(w * 0.45 + side))
+            foot = 0.45 * np.sin(w * 0.6 + side + 0.5)
+            arm = 0.3 + 0.9 * np.sin(w * 0.3 + side + 1.0)
+            g = body_pose(
+                np.broadcast_to(self.spot, (t.size, 2)), _unit(heading), pel_z, hip, knee,
+                foot, arm, elbow=0.8 - 0.7 * np.cos(w * 0.5 + side),
+                hip_abd=0.2 * (1 - np.cos(w * 0.4 + side + 2.0)),
+                arm_abd=0.6 * (1 - np.cos(w * 0.25 + side + 0.7)),
+            )  # fmt: skip
+        return self.dress(g, t)
+
+
+def _unit(heading: F64) -> F64:
+    """Headings (K,) rad -> unit vectors (K, 2) on the floor."""
+    return np.stack([np.cos(heading), np.sin(heading)], 1)
+
+
+def body_for(motion: str, seed: int) -> GaitBody:
+    """The body of subject ``seed`` in ``motion`` (one of :data:`BODY_MOTIONS`)."""
+    if motion == "walk":
+        return GaitBody.for_seed(seed)
+    return PosedBody(motion, seed)
