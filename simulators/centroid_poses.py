@@ -7,12 +7,14 @@ seed: size, marker placement, soft tissue — in two motions besides the walk:
 
 * ``static``: standing in a neutral pose (legs straight, arms hanging slightly away
   from the trunk) on a spot and with a heading drawn from the seed, swaying a few mm;
-* ``rom``: on the same spot, turning slowly on the spot while every joint of the body
+* ``rom``: on the same spot, first 1 s standing in the neutral pose (as a ROM trial
+  starts), then, eased in over 1 s, turning slowly on the spot while every joint of the body
   moves through a range wider than the walk's (hip flexion -0.45 to 0.75 rad and
-  abduction to 0.4 rad, knee flexion to 1.3 rad, foot pitch +-0.45 rad, shoulder
+  abduction to 0.4 rad, knee flexion to 1.3 rad, foot pitch -0.6 to 0.4 rad (the walk's -0.5 to 0.2), shoulder
   flexion -0.6 to 1.2 rad and abduction to 1.2 rad, elbow flexion 0.1 to 1.5 rad) and
   the pelvis goes down to 930 mm (the walk's 935-965 mm, a crouch on this body's
-  960 mm legs: feet pressed into the floor stay on it, as in the walk).
+  960 mm legs) unless the body stands on its lowest foot marker, 10 mm above the floor
+  (the walk presses feet into the floor and keeps them on it; the ROM trial does not).
 """
 
 from __future__ import annotations
@@ -28,6 +30,12 @@ __all__ = ["BODY_MOTIONS", "STANDING_PELVIS_MM", "PosedBody", "body_for"]
 BODY_MOTIONS = ("walk", "static", "rom")
 #: Pelvis height standing with straight legs (mm): ankles 60 mm above the floor.
 STANDING_PELVIS_MM = 1020.0
+#: The ROM trial starts standing in the neutral pose for this long (s), then eases
+#: into its motion over ROM_EASE_S.
+ROM_NEUTRAL_S = 1.0
+ROM_EASE_S = 1.0
+#: In the ROM trial, the lowest foot marker is at least this high (mm).
+LOWEST_MM = 10.0
 
 
 class PosedBody(GaitBody):
@@ -66,28 +74,41 @@ class PosedBody(GaitBody):
         t = np.asarray(t, dtype=np.float64)
         w = 2 * np.pi * t[:, None]
         side = np.array([0.0, np.pi])  # left, right out of phase
-        if self.motion == "static":
-            sway = np.stack([4 * np.sin(2 * np.pi * 0.23 * t + 0.3),
-                             3 * np.sin(2 * np.pi * 0.17 * t + 1.1)], 1)  # fmt: skip
-            heading = self.heading + 0.01 * np.sin(2 * np.pi * 0.11 * t)
-            pel_z = STANDING_PELVIS_MM - 2 + 2 * np.cos(2 * np.pi * 0.3 * t)
-            ones = np.ones((t.size, 2))
-            hip, knee, foot, arm = 0.02 * ones, 0.04 * ones, 0.0 * ones, 0.05 * ones
-            g = body_pose(self.spot + sway, _unit(heading), pel_z, hip, knee, foot, arm,
-                          elbow=0.15, arm_abd=0.12)  # fmt: skip
-        else:
-            heading = self.heading + 2 * np.pi * 0.08 * t
-            pel_z = 985.0 - 55.0 * np.cos(2 * np.pi * 0.2 * t)
-            hip = 0.15 + 0.6 * np.sin(w * 0.35 + side)
-            knee = 0.65 * (1 - np.cos(w * 0.45 + side))
-            foot = 0.45 * np.sin(w * 0.6 + side + 0.5)
-            arm = 0.3 + 0.9 * np.sin(w * 0.3 + side + 1.0)
-            g = body_pose(
-                np.broadcast_to(self.spot, (t.size, 2)), _unit(heading), pel_z, hip, knee,
-                foot, arm, elbow=0.8 - 0.7 * np.cos(w * 0.5 + side),
-                hip_abd=0.2 * (1 - np.cos(w * 0.4 + side + 2.0)),
-                arm_abd=0.6 * (1 - np.cos(w * 0.25 + side + 0.7)),
-            )  # fmt: skip
+        ones = np.ones((t.size, 2))
+        # neutral: legs straight, arms hanging slightly away from the trunk
+        pose = {"hip": 0.02 * ones, "knee": 0.04 * ones, "foot": 0.0 * ones,
+                "arm": 0.05 * ones, "elbow": 0.15 * ones, "hip_abd": 0.0 * ones,
+                "arm_abd": 0.12 * ones}  # fmt: skip
+        sway = np.stack([4 * np.sin(2 * np.pi * 0.23 * t + 0.3),
+                         3 * np.sin(2 * np.pi * 0.17 * t + 1.1)], 1)  # fmt: skip
+        heading = self.heading + 0.01 * np.sin(2 * np.pi * 0.11 * t)
+        pel_z = STANDING_PELVIS_MM - 2 + 2 * np.cos(2 * np.pi * 0.3 * t)
+        if self.motion == "rom":
+            # ROM_NEUTRAL_S standing, then every joint eased into its range of motion
+            e = np.clip((t - ROM_NEUTRAL_S) / ROM_EASE_S, 0.0, 1.0)
+            e = e * e * (3 - 2 * e)
+            moving = {
+                "hip": 0.15 + 0.6 * np.sin(w * 0.35 + side),
+                "knee": 0.65 * (1 - np.cos(w * 0.45 + side)),
+                "foot": -0.1 + 0.5 * np.sin(w * 0.6 + side + 0.5),
+                "arm": 0.3 + 0.9 * np.sin(w * 0.3 + side + 1.0),
+                "elbow": 0.8 - 0.7 * np.cos(w * 0.5 + side),
+                "hip_abd": 0.2 * (1 - np.cos(w * 0.4 + side + 2.0)),
+                "arm_abd": 0.6 * (1 - np.cos(w * 0.25 + side + 0.7)),
+            }
+            pose = {k: v + e[:, None] * (moving[k] - v) for k, v in pose.items()}
+            heading = heading + 2 * np.pi * 0.08 * np.maximum(t - ROM_NEUTRAL_S, 0.0) * e
+            pel_z = pel_z + e * (985.0 - 55.0 * np.cos(2 * np.pi * 0.2 * t) - pel_z)
+            sway = sway * (1 - e[:, None])
+        # Posed well above the floor, then let down until the lowest foot marker is
+        # LOWEST_MM above it: the body stands on its lowest foot.
+        g = body_pose(
+            self.spot + sway, _unit(heading), pel_z + 3000, pose["hip"], pose["knee"],
+            pose["foot"], pose["arm"], elbow=pose["elbow"], hip_abd=pose["hip_abd"],
+            arm_abd=pose["arm_abd"],
+        )  # fmt: skip
+        low = g[:, :, 2].min(axis=1) - 3000
+        g[:, :, 2] -= 3000 - np.maximum(LOWEST_MM - low, 0.0)[:, None]
         return self.dress(g, t)
 
 

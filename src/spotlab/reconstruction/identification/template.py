@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from spotlab.core.errors import ReconstructionError
-from spotlab.reconstruction.identification.model import Link, MarkerModel
+from spotlab.reconstruction.identification.model import Link, MarkerModel, Segment
 
 __all__ = ["Template", "TemplateFit", "fit_template", "similarity_procrustes"]
 
@@ -121,7 +121,16 @@ class Template:
         X = np.asarray(positions_mm, dtype=np.float64)
         if X.shape != self.neutral_mm.shape:
             raise ReconstructionError(f"positions must have shape {self.neutral_mm.shape}")
-        base = MarkerModel.from_trajectories(self.labels, X[None], self.segments)
+        index = {name: m for m, name in enumerate(self.labels)}
+        segments = []
+        for name, members in self.segments.items():
+            unknown = [x for x in members if x not in index]
+            if unknown:
+                raise ReconstructionError(f"segment {name!r}: unknown markers {unknown}")
+            m = [index[x] for x in members]
+            if not np.isfinite(X[m]).all():
+                raise ReconstructionError(f"segment {name!r} misses a marker in the pose")
+            segments.append(Segment(name, tuple(m), X[m] - X[m].mean(axis=0)))
         T = self.neutral_mm
         links = []
         for k in self.links:
@@ -131,7 +140,7 @@ class Template:
             lo = d_s + scale * (k.min_mm - d_t) - margin_mm
             hi = d_s + scale * (k.max_mm - d_t) + margin_mm
             links.append(Link(k.a, k.b, max(0.0, lo), max(0.0, hi)))
-        return MarkerModel(base.labels, base.segments, tuple(links))
+        return MarkerModel(self.labels, tuple(segments), tuple(links))
 
     def to_json(self) -> dict[str, Any]:
         """JSON-safe description (the layout of :meth:`save`)."""
