@@ -34,8 +34,8 @@ STANDING_PELVIS_MM = 1020.0
 #: into its motion over ROM_EASE_S.
 ROM_NEUTRAL_S = 1.0
 ROM_EASE_S = 1.0
-#: In the ROM trial, the lowest foot marker is at least this high (mm).
-LOWEST_MM = 10.0
+#: Stride frequency of the ROM trial's stepping in place (Hz).
+ROM_STRIDE_HZ = 0.8
 
 
 class PosedBody(GaitBody):
@@ -87,28 +87,27 @@ class PosedBody(GaitBody):
             # ROM_NEUTRAL_S standing, then every joint eased into its range of motion
             e = np.clip((t - ROM_NEUTRAL_S) / ROM_EASE_S, 0.0, 1.0)
             e = e * e * (3 - 2 * e)
-            moving = {
-                "hip": 0.15 + 0.6 * np.sin(w * 0.35 + side),
-                "knee": 0.65 * (1 - np.cos(w * 0.45 + side)),
-                "foot": -0.1 + 0.5 * np.sin(w * 0.6 + side + 0.5),
-                "arm": 0.3 + 0.9 * np.sin(w * 0.3 + side + 1.0),
-                "elbow": 0.8 - 0.7 * np.cos(w * 0.5 + side),
-                "hip_abd": 0.2 * (1 - np.cos(w * 0.4 + side + 2.0)),
-                "arm_abd": 0.6 * (1 - np.cos(w * 0.25 + side + 0.7)),
+            p = 2 * np.pi * ROM_STRIDE_HZ * t[:, None] + side  # stride phase, (K, 2)
+            q = 2 * np.pi * t[:, None]
+            moving = {  # the walk's joints (simulators.motions.Gait), wider, and more
+                "hip": 0.55 * np.sin(p),
+                "knee": 0.4 * (1 - np.cos(p + 0.6)),
+                "foot": 0.5 * (0.55 * np.sin(p) - 0.4 * (1 - np.cos(p + 0.6)))
+                + 0.15 * np.sin(q * 0.7 + side),
+                "arm": -0.5 * np.sin(p),
+                "elbow": 0.45 - 0.25 * np.cos(q * 0.5 + side),
+                "hip_abd": 0.1 * (1 - np.cos(q * 0.4 + 2.0)) - 0.03,
+                "arm_abd": 0.15 * (1 - np.cos(q * 0.3 + 0.7)) - 0.05,
             }
             pose = {k: v + e[:, None] * (moving[k] - v) for k, v in pose.items()}
             heading = heading + 2 * np.pi * 0.08 * np.maximum(t - ROM_NEUTRAL_S, 0.0) * e
-            pel_z = pel_z + e * (985.0 - 55.0 * np.cos(2 * np.pi * 0.2 * t) - pel_z)
+            ph = 2 * np.pi * ROM_STRIDE_HZ * t
+            pel_z = pel_z + e * (965.0 + 15.0 * np.cos(2 * ph) - 30 * np.cos(0.4 * ph) - pel_z)
             sway = sway * (1 - e[:, None])
-        # Posed well above the floor, then let down until the lowest foot marker is
-        # LOWEST_MM above it: the body stands on its lowest foot.
         g = body_pose(
-            self.spot + sway, _unit(heading), pel_z + 3000, pose["hip"], pose["knee"],
-            pose["foot"], pose["arm"], elbow=pose["elbow"], hip_abd=pose["hip_abd"],
-            arm_abd=pose["arm_abd"],
+            self.spot + sway, _unit(heading), pel_z, pose["hip"], pose["knee"], pose["foot"],
+            pose["arm"], elbow=pose["elbow"], hip_abd=pose["hip_abd"], arm_abd=pose["arm_abd"],
         )  # fmt: skip
-        low = g[:, :, 2].min(axis=1) - 3000
-        g[:, :, 2] -= 3000 - np.maximum(LOWEST_MM - low, 0.0)[:, None]
         return self.dress(g, t)
 
 

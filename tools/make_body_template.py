@@ -27,7 +27,7 @@ OUT = Path(__file__).resolve().parents[1] / (
     "src/spotlab/reconstruction/identification/templates/spotlab-body.json"
 )
 TOLERANCE_MM = 2.0
-LINK_SPREAD_MM = 260.0
+LINK_SPREAD_MM = 450.0
 
 
 def main() -> int:

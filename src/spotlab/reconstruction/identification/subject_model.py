@@ -14,16 +14,28 @@ labels do not widen it), widened by ``margin_mm``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
+from spotlab.geometry import Rig
+from spotlab.reconstruction.identification.blobs import BlobFrame
+from spotlab.reconstruction.identification.identifier import Identifier
 from spotlab.reconstruction.identification.model import Link, MarkerModel, Segment
-from spotlab.reconstruction.identification.template import Template, TemplateFit
+from spotlab.reconstruction.identification.template import Template, TemplateFit, fit_template
 
-__all__ = ["FIRST_MARGIN_MM", "LEARN_MARGIN_MM", "first_model", "learn_model", "static_pose"]
+__all__ = [
+    "FIRST_MARGIN_MM",
+    "LEARN_MARGIN_MM",
+    "first_model",
+    "label_trial",
+    "learn_model",
+    "static_pose",
+    "subject_template",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -33,6 +45,8 @@ FIRST_MARGIN_MM = 15.0
 LEARN_MARGIN_MM = 5.0
 #: Percentiles of the distances seen left out at each end of a learnt range.
 TRIM_PERCENT = 0.5
+#: Other pairs whose distance varies less than this in the ROM trial become links (mm).
+LINK_SPREAD_MM = 60.0
 #: Frames a link must be seen in, in the ROM trial, for its range to be learnt.
 MIN_LINK_FRAMES = 20
 
@@ -65,9 +79,72 @@ def first_model(
     -------
     MarkerModel
     """
-    return template.model(
-        static_pose(points, fit, template), scale=fit.scale, margin_mm=margin_mm
-    )
+    return template.model(static_pose(points, fit, template), scale=fit.scale, margin_mm=margin_mm)
+
+
+def subject_template(
+    points: Any, fit: TemplateFit, template: Template, model: MarkerModel
+) -> Template:
+    """The subject's own static pose as a template (its body frame, its own size), with
+    ``model``'s structure: what :func:`label_trial` fits to a trial's first frame."""
+    X = static_pose(points, fit, template)
+    body = (X - fit.translation) @ fit.rotation  # rotation only: the subject's own size
+    segments = {s.name: tuple(model.labels[m] for m in s.markers) for s in model.segments}
+    return Template(
+        f"{template.name} (subject)", model.labels, body, segments, model.links,
+        f"static pose fitted to template {template.name!r}",
+    )  # fmt: skip
+
+
+def label_trial(
+    rig: Rig,
+    frames: Iterable[tuple[BlobFrame, Any]],
+    model: MarkerModel,
+    start: Template | None = None,
+    **identifier_options: Any,
+) -> tuple[FloatArray, TemplateFit | None]:
+    """Label a trial with ``model``: a ROM trial, to learn the final model from.
+
+    Parameters
+    ----------
+    rig : Rig
+    frames : iterable of (BlobFrame, unusable)
+        Each frame's blobs and its unusable cameras (or None).
+    model : MarkerModel
+    start : Template, optional
+        The subject's static pose (:func:`subject_template`): the trial starts in it, and
+        the first frame's points are labelled by fitting it (:func:`.fit_template`),
+        then carried by tracking; the model's links alone cannot tell apart markers close
+        together on a cold start. None: the identifier alone.
+    **identifier_options
+        Passed to :class:`Identifier`.
+
+    Returns
+    -------
+    positions : ndarray, shape (F, M, 3)
+        Labelled positions (mm), NaN where a marker was not labelled.
+    fit : TemplateFit or None
+        The fit of ``start`` to the first frame.
+
+    Raises
+    ------
+    ReconstructionError
+        When the first frame does not fit ``start`` (the trial does not start in the
+        static pose).
+    """
+    identify = Identifier(rig, model, **identifier_options)
+    out = []
+    fit = None
+    for f, (frame, unusable) in enumerate(frames):
+        result = identify(frame, unusable)
+        if f == 0 and start is not None:
+            fit = fit_template(identify.current_points(), start)
+            identify.seed_labels(fit.marker_of)
+            result = identify(frame, unusable)  # the frame again, its labels checked
+        out.append(result.points)
+    if not out:
+        raise ReconstructionError("the trial has no frames")
+    return np.stack(out), fit
 
 
 def learn_model(
@@ -77,6 +154,7 @@ def learn_model(
     margin_mm: float = LEARN_MARGIN_MM,
     min_frames: int = MIN_LINK_FRAMES,
     trim_percent: float = TRIM_PERCENT,
+    link_spread_mm: float | None = LINK_SPREAD_MM,
 ) -> MarkerModel:
     """The final model from trajectories labelled with ``model`` (a ROM trial).
 
@@ -93,6 +171,10 @@ def learn_model(
     trim_percent : float
         The range learnt runs from this percentile of the distances seen to 100 minus
         it: a few wrong labels in the trial do not widen it.
+    link_spread_mm : float or None
+        Pairs of markers not on a common segment and not yet linked whose distance
+        varied by less than this over the trial become links too (narrow ranges tell
+        nearby points apart); None: the model's links only.
 
     Returns
     -------
@@ -112,13 +194,23 @@ def learn_model(
         names = [model.labels[m] for m in seg.markers]
         alone = MarkerModel.from_trajectories(names, X[:, list(seg.markers)], {seg.name: names})
         segments.append(Segment(seg.name, seg.markers, alone.segments[0].coordinates))
-    links = []
+    M = len(model.labels)
+    a, b = np.triu_indices(M, 1)
+    linked = np.zeros((M, M), dtype=bool)
     for k in model.links:
-        d = np.linalg.norm(X[:, k.a] - X[:, k.b], axis=1)
+        linked[k.a, k.b] = linked[k.b, k.a] = True
+    owner = model.segment_of
+    links = []
+    for i, j in zip(a, b, strict=True):
+        if owner[i] >= 0 and owner[i] == owner[j]:
+            continue
+        d = np.linalg.norm(X[:, i] - X[:, j], axis=1)
         d = d[np.isfinite(d)]
-        if d.size >= min_frames:
-            lo, hi = np.percentile(d, [trim_percent, 100.0 - trim_percent])
-            links.append(Link(k.a, k.b, max(0.0, float(lo) - margin_mm), float(hi) + margin_mm))
-        else:
-            links.append(k)
+        if d.size < min_frames:
+            continue
+        lo, hi = np.percentile(d, [trim_percent, 100.0 - trim_percent])
+        if linked[i, j] or (link_spread_mm is not None and hi - lo < link_spread_mm):
+            links.append(Link(int(i), int(j), max(0.0, lo - margin_mm), hi + margin_mm))
+            linked[i, j] = linked[j, i] = False  # done
+    links.extend(k for k in model.links if linked[k.a, k.b])  # too rarely seen: kept
     return MarkerModel(model.labels, tuple(segments), tuple(links))
