@@ -8,13 +8,17 @@ seed: size, marker placement, soft tissue — in two motions besides the walk:
 * ``static``: standing in a neutral pose (legs straight, arms hanging slightly away
   from the trunk) on a spot and with a heading drawn from the seed, swaying a few mm;
 * ``rom``: on the same spot, first 1 s standing in the neutral pose (as a ROM trial
-  starts), then, eased in over 1 s, turning slowly on the spot while every joint of the body
-  moves through a range wider than the walk's (hip flexion -0.45 to 0.75 rad and
-  abduction to 0.4 rad, knee flexion to 1.3 rad, foot pitch -0.6 to 0.4 rad (the walk's -0.5 to 0.2), shoulder
-  flexion -0.6 to 1.2 rad and abduction to 1.2 rad, elbow flexion 0.1 to 1.5 rad) and
-  the pelvis goes down to 930 mm (the walk's 935-965 mm, a crouch on this body's
-  960 mm legs) unless the body stands on its lowest foot marker, 10 mm above the floor
-  (the walk presses feet into the floor and keeps them on it; the ROM trial does not).
+  starts), then, eased in over 1 s, stepping in place while turning slowly (0.08 turn
+  a second): the walk's joints (:class:`~spotlab.simulators.motions.Gait`) through
+  wider ranges (hip flexion +-0.55 rad, knee flexion to 0.8 rad, foot pitch following
+  the shank +-0.15 rad, shoulder flexion +-0.5 rad; the walk's: +-0.4, 0.55, -, +-0.35)
+  at 0.8 strides a second, and the joints the walk keeps still: elbow flexion 0.2 to
+  0.7 rad (the walk's 0.3), shoulder abduction -0.05 to 0.25 rad and hip abduction
+  -0.03 to 0.17 rad (the walk's 0), the pelvis 925-1005 mm high (the walk's 935-965;
+  feet pressed into the floor stay on it, as in the walk).
+
+A ROM trial's ranges have to hold the motion later labelled with the model learnt from
+it: a marker whose distances leave the ranges learnt is not labelled.
 """
 
 from __future__ import annotations
@@ -72,7 +76,6 @@ class PosedBody(GaitBody):
     def all_markers(self, t: F64) -> F64:
         """All 40 markers at times (K,) s -> (K, 40, 3) mm."""
         t = np.asarray(t, dtype=np.float64)
-        w = 2 * np.pi * t[:, None]
         side = np.array([0.0, np.pi])  # left, right out of phase
         ones = np.ones((t.size, 2))
         # neutral: legs straight, arms hanging slightly away from the trunk

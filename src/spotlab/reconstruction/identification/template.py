@@ -30,6 +30,7 @@ import json
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from importlib import resources
 from typing import Any
 
 import numpy as np
@@ -39,7 +40,14 @@ from scipy.optimize import linear_sum_assignment
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction.identification.model import Link, MarkerModel, Segment
 
-__all__ = ["Template", "TemplateFit", "fit_template", "similarity_procrustes"]
+__all__ = [
+    "Template",
+    "TemplateFit",
+    "fit_template",
+    "load_template",
+    "shipped_templates",
+    "similarity_procrustes",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -393,3 +401,33 @@ def fit_template(
         yaw_deg=float(np.degrees(np.arctan2(fwd[1], fwd[0])) % 360.0),
         residual_mm=residual, rms_mm=rms, matched=matched,
     )  # fmt: skip
+
+
+def shipped_templates() -> list[str]:
+    """Names of the templates shipped with spotlab (package data ``templates/*.json``)."""
+    folder = resources.files(__package__ or "spotlab.reconstruction.identification")
+    return sorted(
+        f.name.removesuffix(".json")
+        for f in folder.joinpath("templates").iterdir()
+        if f.name.endswith(".json")
+    )
+
+
+def load_template(name_or_path: str | os.PathLike[str]) -> Template:
+    """A shipped template by name (:func:`shipped_templates`), or a template JSON file.
+
+    Raises
+    ------
+    ReconstructionError
+        For a name that is neither a shipped template nor a file, or a malformed file.
+    """
+    text = os.fspath(name_or_path)
+    if os.path.isfile(text):
+        return Template.load(text)
+    if text in shipped_templates():
+        folder = resources.files(__package__ or "spotlab.reconstruction.identification")
+        data = json.loads(folder.joinpath("templates", f"{text}.json").read_text("utf-8"))
+        return Template.from_json(data, text)
+    raise ReconstructionError(
+        f"no template {text!r}: neither a file nor one of {', '.join(shipped_templates())}"
+    )
