@@ -77,6 +77,11 @@ class Template:
         template's body size.
     source : str
         Where the pose and structure come from.
+    cap_mm, max_rms_mm : float
+        The template's own bounds of :func:`fit_template` (mm): how far a subject's
+        markers may sit from the fitted template and still be matched, and the largest
+        RMS residual of an accepted fit. Real marker sets vary more between subjects and
+        labs than the simulator's placement (``lower-limb``: 120 and 70 mm).
     """
 
     name: str
@@ -85,6 +90,8 @@ class Template:
     segments: Mapping[str, tuple[str, ...]]
     links: tuple[Link, ...]
     source: str = ""
+    cap_mm: float = CAP_MM
+    max_rms_mm: float = MAX_RMS_MM
 
     def __post_init__(self) -> None:
         M = len(self.labels)
@@ -166,6 +173,7 @@ class Template:
                 }
                 for k in self.links
             ],
+            "fit_bounds": {"cap_mm": self.cap_mm, "max_rms_mm": self.max_rms_mm},
         }
 
     def save(self, path: str | os.PathLike[str]) -> None:
@@ -191,6 +199,8 @@ class Template:
                 str(data.get("name", "")), labels,
                 np.asarray(data["neutral_mm"], dtype=np.float64), segments, links,
                 str(data.get("source", "")),
+                float(data.get("fit_bounds", {}).get("cap_mm", CAP_MM)),
+                float(data.get("fit_bounds", {}).get("max_rms_mm", MAX_RMS_MM)),
             )  # fmt: skip
         except (ValueError, KeyError, TypeError, IndexError) as exc:
             raise ReconstructionError(f"{where}: not a marker template ({exc!r})") from None
@@ -301,9 +311,9 @@ def fit_template(
     points: Any,
     template: Template,
     *,
-    cap_mm: float = CAP_MM,
+    cap_mm: float | None = None,
     min_matched: float = MIN_MATCHED,
-    max_rms_mm: float = MAX_RMS_MM,
+    max_rms_mm: float | None = None,
     yaw_step_deg: float = 5.0,
     rounds: int = 6,
 ) -> TemplateFit:
@@ -315,12 +325,13 @@ def fit_template(
         Unlabelled points (mm), z up with the floor at z = 0; NaN rows are ignored. N
         may differ from the template's M (hidden markers, extra points).
     template : Template
-    cap_mm : float
-        Largest distance of an assigned marker-point pair (mm).
+    cap_mm : float, optional
+        Largest distance of an assigned marker-point pair (mm); default the template's.
     min_matched : float
         Smallest accepted fraction of the template's markers matched.
-    max_rms_mm : float
-        Largest accepted RMS residual of the matched markers (mm).
+    max_rms_mm : float, optional
+        Largest accepted RMS residual of the matched markers (mm); default the
+        template's.
     yaw_step_deg : float
         Step of the yaw search over the full circle (deg).
     rounds : int
@@ -336,6 +347,8 @@ def fit_template(
         For a bad cloud (shape, fewer than 3 points, nothing above the floor) or a fit
         beyond the bounds (too few matched markers, RMS too large).
     """
+    cap_mm = template.cap_mm if cap_mm is None else cap_mm
+    max_rms_mm = template.max_rms_mm if max_rms_mm is None else max_rms_mm
     P_all = np.asarray(points, dtype=np.float64)
     if P_all.ndim != 2 or P_all.shape[1] != 3:
         raise ReconstructionError(f"points must have shape (N, 3), got {P_all.shape}")
