@@ -291,7 +291,7 @@ def _rot_z(yaw: float) -> FloatArray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _assign(T: FloatArray, P: FloatArray, cap_mm: float) -> tuple[IntArray, FloatArray]:
+def _assign(T: FloatArray, P: FloatArray, cap_mm: float) -> tuple[IntArray, float]:
     """Hungarian assignment of markers ``T`` (M, 3) to points ``P`` (N, 3), pairs farther
     than ``cap_mm`` left out: point index per marker (-1 unmatched) and capped cost."""
     D2 = ((T[:, None, :] - P[None, :, :]) ** 2).sum(axis=2)
