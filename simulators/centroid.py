@@ -28,7 +28,8 @@ import numpy.typing as npt
 from spotlab.geometry import Rig
 from spotlab.simulators import centroid_wire as cw
 from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_cameras, sight_blocked
-from spotlab.simulators.centroid_body import GaitBody, carried_by, segment_capsules
+from spotlab.simulators.centroid_body import carried_by, segment_capsules
+from spotlab.simulators.centroid_poses import body_for
 from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
@@ -209,6 +210,9 @@ class CentroidDevice(SelspotDevice):
         Sunlit cameras and cameras offline, in seconds after ``START:``.
     occlusion : bool
         Body segments hide markers.
+    body_motion : str
+        What the body does: ``walk``, ``static`` or ``rom``
+        (:func:`spotlab.simulators.centroid_poses.body_for`).
     serial, seed, fault_log, default_rate_hz, now_ns, lab :
         As :class:`SelspotDevice`.
     truth : path, optional
@@ -234,6 +238,7 @@ class CentroidDevice(SelspotDevice):
         default_rate_hz: float = 100.0,
         now_ns: int | None = None,
         lab: LabPublisher | None = None,
+        body_motion: str = "walk",
     ) -> None:
         self.rig = rig if rig is not None else reference_rig(8)
         n_cams = len(self.rig.cameras)
@@ -242,7 +247,7 @@ class CentroidDevice(SelspotDevice):
         if markers < 1:
             raise ValueError(f"markers must be >= 1, got {markers}")
         self.model = model if model is not None else BlobModel()
-        self.body = GaitBody.for_seed(seed)
+        self.body = body_for(body_motion, seed)
         self.n_markers = markers
         self.labels = (self.body.labels + reference_markers(max(markers - 40, 0), seed).labels)[
             :markers

@@ -16,6 +16,7 @@ from urllib.parse import quote
 
 from spotlab.simulators.blobs import BlobModel
 from spotlab.simulators.centroid import CentroidDevice, Episode
+from spotlab.simulators.centroid_poses import BODY_MOTIONS
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import FaultInjector
 from spotlab.simulators.lab import LabPublisher, lab_dir
@@ -66,6 +67,9 @@ class CentroidSimOptions:
         a ring of that many when more than 8 (1-16).
     markers : int
         Markers (the 40 of the walking body first, static ones beyond).
+    motion : str
+        What the body does: ``walk``, ``static`` (standing still) or ``rom`` (range of
+        motion), see :mod:`spotlab.simulators.centroid_poses`.
     rate_hz : float
         Frame rate after reset or ``INIT:``.
     seed : int
@@ -96,6 +100,7 @@ class CentroidSimOptions:
 
     cameras: int = 8
     markers: int = 40
+    motion: str = "walk"
     rate_hz: float = 100.0
     seed: int = 0
     truth: Path | None = None
@@ -122,6 +127,8 @@ class CentroidSimOptions:
             raise ValueError(f"cameras must be 1 to 16, got {self.cameras}")
         if not 1 <= self.markers <= 512:
             raise ValueError(f"markers must be 1 to 512, got {self.markers}")
+        if self.motion not in BODY_MOTIONS:
+            raise ValueError(f"motion {self.motion!r}: expected one of {', '.join(BODY_MOTIONS)}")
         if not 1.0 <= self.rate_hz <= 2000.0:
             raise ValueError(f"rate must be 1 Hz to 2 kHz, got {self.rate_hz}")
         if not 0.0 <= self.ghost_rate <= 1.0:
@@ -155,6 +162,7 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
         camera_off=parse_episodes(options.camera_off, "camera-off"),
         occlusion=bool(options.occlusion), serial=options.serial, seed=options.seed,
         truth=options.truth, fault_log=options.fault_log, default_rate_hz=options.rate_hz,
+        body_motion=options.motion,
         now_ns=clock.epoch_ns,
         lab=(
             LabPublisher(lab_dir(options.lab), options.lab_name, clock, FRAME_PULSE_WIDTH_S)

@@ -247,6 +247,73 @@ GAIT_LABELS = (
 )  # fmt: skip
 
 
+def _abduct(f: F64, lat: float, lt: float, u: F64, top: F64, ab: F64) -> tuple[F64, F64, F64]:
+    """A limb point (forward f, lateral ``lat * lt``, up u) turned outwards by ``ab``
+    (rad) about the forward axis through the limb's top at height ``top``."""
+    rel = u - top
+    return f, lat * (lt - rel * np.sin(ab)), top + rel * np.cos(ab)
+
+
+def body_pose(
+    base: F64, fwd: F64, pel_z: F64, hip: F64, knee: F64, foot: F64, arm: F64,
+    *, elbow: F64 | float = 0.3, hip_abd: F64 | float = 0.0, arm_abd: F64 | float = 0.0,
+) -> F64:  # fmt: skip
+    """The 19 markers of :class:`Gait`'s body in a pose -> (K, 19, 3) mm.
+
+    Parameters
+    ----------
+    base : ndarray, shape (K, 2)
+        Floor point below the pelvis (mm).
+    fwd : ndarray, shape (K, 2)
+        Unit heading on the floor.
+    pel_z : ndarray, shape (K,)
+        Pelvis height (mm).
+    hip, knee, foot, arm : ndarray, shape (K, 2)
+        Left and right joint angles (rad): hip flexion, knee flexion, foot pitch (toe
+        down), shoulder flexion (arm forward).
+    elbow, hip_abd, arm_abd : ndarray, shape (K, 2), or float
+        Forearm flexion relative to the upper arm, hip and shoulder abduction (rad).
+    """
+    left = np.stack([-fwd[:, 1], fwd[:, 0]], 1)
+    zero = np.zeros(base.shape[0])
+    elbow, hip_abd, arm_abd = (np.broadcast_to(np.asarray(v, np.float64), hip.shape)
+                               for v in (elbow, hip_abd, arm_abd))  # fmt: skip
+    cols: dict[str, tuple[F64, F64, F64]] = {}  # (forward, left, up) in mm
+    for k, (side, lat) in enumerate((("L", 1.0), ("R", -1.0))):
+        h, kn, ft, ar = hip[:, k], knee[:, k], foot[:, k], arm[:, k]
+        hip_u, sh_u = pel_z - 80, pel_z + 480
+
+        kf, ku = 450 * np.sin(h), hip_u - 450 * np.cos(h)
+        shank = h - kn
+        af, au = kf + 430 * np.sin(shank), ku - 430 * np.cos(shank)
+        ab = hip_abd[:, k]
+        cols[side + "KNE"] = _abduct(kf, lat, 95, ku, hip_u, ab)
+        cols[side + "ANK"] = _abduct(af, lat, 90, au, hip_u, ab)
+        cols[side + "HEE"] = _abduct(
+            af - 50 * np.cos(ft), lat, 90, au - 40 + 50 * np.sin(ft), hip_u, ab
+        )
+        cols[side + "TOE"] = _abduct(
+            af + 140 * np.cos(ft), lat, 85, au - 50 - 140 * np.sin(ft), hip_u, ab
+        )
+        ef, eu = 300 * np.sin(ar), sh_u - 300 * np.cos(ar)
+        fa = ar + elbow[:, k]
+        ab = arm_abd[:, k]
+        cols[side + "SHO"] = (zero, lat * 180 + zero, sh_u)
+        cols[side + "ELB"] = _abduct(ef, lat, 200, eu, sh_u, ab)
+        cols[side + "WRA"] = _abduct(
+            ef + 260 * np.sin(fa), lat, 190, eu - 260 * np.cos(fa), sh_u, ab
+        )
+        cols[side + "ASI"] = (100 + zero, lat * 120 + zero, pel_z)
+    cols["SACR"] = (-100 + zero, zero, pel_z + 10)
+    cols["C7"] = (-40 + zero, zero, pel_z + 520)
+    cols["HEAD"] = (60 + zero, zero, pel_z + 730)
+    f = np.stack([cols[k][0] for k in GAIT_LABELS], 1)
+    lft = np.stack([cols[k][1] for k in GAIT_LABELS], 1)
+    up = np.maximum(np.stack([cols[k][2] for k in GAIT_LABELS], 1), 5.0)
+    xy = base[:, None, :] + f[..., None] * fwd[:, None, :] + lft[..., None] * left[:, None, :]
+    return np.concatenate([xy, up[..., None]], axis=2)
+
+
 class Gait(Motion):
     """A body walking on a circle of ``radius`` mm at ``speed`` m/s, with 19 surface markers.
 
@@ -267,49 +334,14 @@ class Gait(Motion):
         a = self.speed * t / self.radius
         base = np.stack([self.radius * np.cos(a), self.radius * np.sin(a)], 1)
         fwd = np.stack([-np.sin(a), np.cos(a)], 1)
-        left = -np.stack([np.cos(a), np.sin(a)], 1)
         ph = 2 * np.pi * self.stride_hz * t
-        pel_z = 950.0 + 15.0 * np.cos(2 * ph)
-        cols: dict[str, tuple[F64, F64, F64]] = {}  # (forward, left, up) in mm
-        zero = np.zeros_like(t)
-        for side, lat, p in (("L", 1.0, ph), ("R", -1.0, ph + np.pi)):
-            hip = 0.4 * np.sin(p)
-            knee = 0.55 * (1 - np.cos(p + 0.6)) / 2
-            kf, ku = 450 * np.sin(hip), pel_z - 80 - 450 * np.cos(hip)
-            shank = hip - knee
-            af, au = kf + 430 * np.sin(shank), ku - 430 * np.cos(shank)
-            foot = 0.5 * shank
-            cols[side + "KNE"] = (kf, lat * 95 + zero, ku)
-            cols[side + "ANK"] = (af, lat * 90 + zero, au)
-            cols[side + "HEE"] = (
-                af - 50 * np.cos(foot),
-                lat * 90 + zero,
-                au - 40 + 50 * np.sin(foot),
-            )
-            cols[side + "TOE"] = (
-                af + 140 * np.cos(foot),
-                lat * 85 + zero,
-                au - 50 - 140 * np.sin(foot),
-            )
-            arm = -0.35 * np.sin(p)
-            sh_u = pel_z + 480
-            ef, eu = 300 * np.sin(arm), sh_u - 300 * np.cos(arm)
-            cols[side + "SHO"] = (zero, lat * 180 + zero, sh_u)
-            cols[side + "ELB"] = (ef, lat * 200 + zero, eu)
-            cols[side + "WRA"] = (
-                ef + 260 * np.sin(arm + 0.3),
-                lat * 190 + zero,
-                eu - 260 * np.cos(arm + 0.3),
-            )
-            cols[side + "ASI"] = (100 + zero, lat * 120 + zero, pel_z)
-        cols["SACR"] = (-100 + zero, zero, pel_z + 10)
-        cols["C7"] = (-40 + zero, zero, pel_z + 520)
-        cols["HEAD"] = (60 + zero, zero, pel_z + 730)
-        f = np.stack([cols[k][0] for k in GAIT_LABELS], 1)
-        lft = np.stack([cols[k][1] for k in GAIT_LABELS], 1)
-        up = np.maximum(np.stack([cols[k][2] for k in GAIT_LABELS], 1), 5.0)
-        xy = base[:, None, :] + f[..., None] * fwd[:, None, :] + lft[..., None] * left[:, None, :]
-        return np.concatenate([xy, up[..., None]], axis=2)
+        p = np.stack([ph, ph + np.pi], 1)  # (K, 2): left, right
+        hip = 0.4 * np.sin(p)
+        knee = 0.55 * (1 - np.cos(p + 0.6)) / 2
+        return body_pose(
+            base, fwd, 950.0 + 15.0 * np.cos(2 * ph), hip, knee, 0.5 * (hip - knee),
+            -0.35 * np.sin(p),
+        )  # fmt: skip
 
     def sample(self, times: F64, markers: I64) -> F64:
         t = np.asarray(times, dtype=np.float64)

@@ -91,9 +91,11 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--motion",
-        default="wand",
-        help="wand, cluster, gait, lframe (static L-frame), or a C3D file whose markers "
-        "move the LEDs",
+        default=None,
+        help="selspot: wand (default), cluster, gait, lframe (static L-frame), or a C3D file "
+        "whose markers move the LEDs; centroid: walk (default, the 40-marker body), static "
+        "(the body standing still, swaying a few mm) or rom (range of motion: every joint "
+        "moves while the subject turns on the spot)",
     )
     p.add_argument(
         "--reflectance",
@@ -179,7 +181,7 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         raise CommandError(f"--rate must be positive, got {args.rate}")
     if not 0.0 <= args.reflectance <= 1.0:
         raise CommandError(f"--reflectance must be 0 to 1, got {args.reflectance}")
-    motion = args.motion
+    motion = args.motion or "wand"
     if motion not in MOTIONS and not Path(motion).is_file():
         raise CommandError(f"--motion {motion!r} is neither {', '.join(MOTIONS)} nor a C3D file")
     return service.SelspotSimOptions(
@@ -277,7 +279,7 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
         ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=sun,
         camera_off=off, occlusion=0 if args.no_occlusion else 1,
-        lab_name=args.lab_name or "centroid", lab=args.lab,
+        lab_name=args.lab_name or "centroid", lab=args.lab, motion=args.motion or "walk",
     )  # fmt: skip
     try:
         options.validate()
