@@ -12,7 +12,12 @@ from typing import TYPE_CHECKING, Any
 from spotlab.console.errors import CommandError
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
-from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
+from spotlab.simulators.centroid_service import (
+    CENTROID_MOTIONS,
+    LFRAME_MARKERS,
+    CentroidSimOptions,
+    serve_centroid_pty,
+)
 from spotlab.simulators.motions import MOTIONS
 
 if TYPE_CHECKING:
@@ -68,9 +73,11 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--motion",
-        default="wand",
-        help="wand, cluster, gait, lframe (static L-frame), or a C3D file whose markers "
-        "move the LEDs",
+        default=None,
+        help="selspot: wand (default), cluster, gait, lframe (static L-frame), or a C3D file "
+        "whose markers move the LEDs; centroid: walk (default, the 40-marker body), wand (a "
+        "passive wand of --markers 2 or 3 waved through the volume) or lframe (a static "
+        "L-frame on the floor)",
     )
     p.add_argument(
         "--reflectance",
@@ -120,7 +127,21 @@ def add_parser(sub: Any) -> None:
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
     cen = p.add_argument_group("centroid (video cameras, passive markers)")
-    cen.add_argument("--markers", type=int, default=40, help="markers on the walking body (40)")
+    cen.add_argument(
+        "--markers", type=int, default=None,
+        help="markers: on the walking body (default 40), on the wand (2 or 3, default 3), "
+        "of the L-frame (default 4)",
+    )  # fmt: skip
+    cen.add_argument(
+        "--wand-length", type=float, default=500.0, metavar="MM",
+        help="wand: distance between its end markers (default 500 mm); a 3-marker wand's "
+        "middle marker sits 0.4 of it from end A",
+    )  # fmt: skip
+    cen.add_argument(
+        "--frame-points-out", type=Path, metavar="P.csv",
+        help="write the L-frame's published marker coordinates (X,Y,Z mm per marker) for "
+        "spotlab calibrate --frame-points",
+    )  # fmt: skip
     cen.add_argument(
         "--ghosts", type=float, default=0.02, metavar="RATE",
         help="fraction of (camera, marker) pairs that see a floor-reflection ghost (0.02)",
@@ -155,7 +176,7 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         raise CommandError(f"--rate must be positive, got {args.rate}")
     if not 0.0 <= args.reflectance <= 1.0:
         raise CommandError(f"--reflectance must be 0 to 1, got {args.reflectance}")
-    motion = args.motion
+    motion = args.motion or "wand"
     if motion not in MOTIONS and not Path(motion).is_file():
         raise CommandError(f"--motion {motion!r} is neither {', '.join(MOTIONS)} nor a C3D file")
     return service.SelspotSimOptions(
@@ -224,8 +245,17 @@ def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions
 def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     """Video-centroid simulator options from parsed command-line arguments."""
     sun = [item if "@" in item else f"0@{item}" for item in args.sunlight]
+    motion = args.motion or "walk"
+    if motion not in CENTROID_MOTIONS:
+        raise CommandError(
+            f"--motion {motion!r}: the centroid simulator plays {', '.join(CENTROID_MOTIONS)}"
+        )
+    markers = args.markers
+    if markers is None:
+        markers = {"walk": 40, "wand": 3, "lframe": LFRAME_MARKERS}[motion]
     options = CentroidSimOptions(
-        cameras=8 if args.cameras is None else args.cameras, markers=args.markers,
+        cameras=8 if args.cameras is None else args.cameras, markers=markers, motion=motion,
+        wand_length_mm=args.wand_length, frame_points_out=args.frame_points_out,
         rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
         rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
@@ -245,6 +275,10 @@ def run(args: argparse.Namespace) -> int:
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
         options = centroid_options_from_args(args)
+        if args.model_out is not None and options.motion != "walk":
+            raise CommandError(
+                "--model-out: the marker model is the walking body's (--motion walk)"
+            )
         if args.model_out is not None:
             write_body_model(args.model_out, options.markers, options.seed)
         return _serve(args, serve_centroid_pty(options))
