@@ -14,7 +14,9 @@ The object stands still through a short recording, so per camera:
    little); a triple off a line must stay off it; and for a flat object, seen from the
    side its normal points up to (world +z: cameras look down at the floor), the image
    keeps the object's handedness. The camera's markers are found when exactly one
-   assignment passes; otherwise the camera is counted ``ambiguous`` (several) or
+   assignment passes, or (with the blobs' peaks given) one of several is clearly the
+   brightest (its dimmest blob ``BRIGHTER`` times brighter than the dimmest of every
+   other: floor reflections are dimmer); otherwise the camera is counted ``ambiguous`` (several) or
    ``not found`` (none: a marker hidden, or fewer static blobs than markers).
 
 The L-frame of spotlab's simulator (markers at (0, 0), (200, 0), (600, 0), (0, 400) mm)
@@ -32,7 +34,7 @@ from itertools import combinations, permutations
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.calibration.wand_finder import COLLINEAR_PX, COLLINEAR_REL
+from spotlab.calibration.wand_finder import BRIGHTER, COLLINEAR_PX, COLLINEAR_REL, checked_blobs
 from spotlab.core.errors import CalibrationError
 
 __all__ = [
@@ -179,14 +181,17 @@ def _fits(blobs: FloatArray, geo: _Geometry, P: int) -> IntArray:
     return cand[ok]
 
 
-def _static_blobs(images: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
-    """Centres (K, 2) and spreads (K,) of the blobs that stay put in most images."""
+def _static_blobs(
+    images: list[FloatArray], peaks: list[FloatArray]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Centres (K, 2), spreads (K,) and mean peaks (K,) of the blobs that stay put in
+    most images."""
     n = len(images)
     pick = np.unique(np.linspace(0, n - 1, min(n, _SAMPLE_IMAGES)).astype(int))
     seeds = np.concatenate([images[i] for i in pick]) if pick.size else np.zeros((0, 2))
     owner = np.concatenate([np.full(images[i].shape[0], k) for k, i in enumerate(pick)])
     if seeds.shape[0] == 0:
-        return np.zeros((0, 2)), np.zeros(0)
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
     near = np.linalg.norm(seeds[:, None] - seeds[None], axis=2) <= STATIC_RADIUS_PX
     onehot = np.zeros((seeds.shape[0], pick.size), dtype=bool)
     onehot[np.arange(seeds.shape[0]), owner] = True
@@ -202,24 +207,20 @@ def _static_blobs(images: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
         centres.append(seeds[members].mean(axis=0))
         free &= ~near[i]
     if not centres:
-        return np.zeros((0, 2)), np.zeros(0)
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
     centre = np.array(centres)
     allpts = np.concatenate(images)
+    allpeaks = np.concatenate(peaks)
     dist = np.linalg.norm(allpts[:, None] - centre[None], axis=2)  # (N, K)
     near_all = dist <= STATIC_RADIUS_PX
-    mean = np.stack(
-        [
-            np.where(near_all[:, k, None], allpts, 0).sum(0) / max(near_all[:, k].sum(), 1)
-            for k in range(centre.shape[0])
-        ]
-    )
+    K = centre.shape[0]
+    n_near = np.maximum(near_all.sum(axis=0), 1)
+    mean = np.stack([allpts[near_all[:, k]].sum(axis=0) / n_near[k] for k in range(K)])
     spread = np.array(
-        [
-            allpts[near_all[:, k]].std(axis=0).max() if near_all[:, k].sum() > 1 else 0.0
-            for k in range(centre.shape[0])
-        ]
+        [allpts[near_all[:, k]].std(axis=0).max() if n_near[k] > 1 else 0.0 for k in range(K)]
     )
-    return mean, spread
+    bright = np.array([allpeaks[near_all[:, k]].mean() if n_near[k] else 0.0 for k in range(K)])
+    return mean, spread, bright
 
 
 def find_frame(
@@ -230,6 +231,7 @@ def find_frame(
     *,
     usable_blob: BoolArray | None = None,
     usable_image: BoolArray | None = None,
+    peak: FloatArray | None = None,
 ) -> FrameImages:
     """Find the reference object's markers in every camera of a static recording.
 
@@ -247,6 +249,9 @@ def find_frame(
         Blobs that may be markers (default: all).
     usable_image : ndarray of bool, shape (F, C), optional
         Images to look at (default: all).
+    peak : ndarray, shape (N,), optional
+        The blobs' peak grey levels (of several fitting assignments the clearly brightest
+        is taken; without them the camera is ambiguous).
 
     Returns
     -------
@@ -257,23 +262,14 @@ def find_frame(
     CalibrationError
         For a number of markers outside 3-8, or arrays whose sizes do not match.
     """
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    offsets = np.asarray(offsets, dtype=np.int64)
     points = np.asarray(points, dtype=np.float64)
-    C = int(n_cameras)
     if points.ndim != 2 or points.shape[1] != 3 or not 3 <= points.shape[0] <= 8:
         raise CalibrationError(
             f"the reference object needs 3 to 8 markers (P, 3), got {points.shape}"
         )
-    if C < 1 or (offsets.size - 1) % C or offsets[-1] != uv.shape[0]:
-        raise CalibrationError(
-            f"offsets ({offsets.size}) do not fit {C} cameras and {uv.shape[0]} blobs"
-        )
-    F = (offsets.size - 1) // C
-    blob_ok = np.ones(uv.shape[0], bool) if usable_blob is None else np.asarray(usable_blob)
-    image_ok = np.ones((F, C), bool) if usable_image is None else np.asarray(usable_image)
-    if blob_ok.shape != (uv.shape[0],) or image_ok.shape != (F, C):
-        raise CalibrationError("usable_blob must be (N,) and usable_image (F, C)")
+    uv, offsets, C, _, blob_ok, image_ok = checked_blobs(
+        uv, offsets, n_cameras, usable_blob, usable_image
+    )
     P = points.shape[0]
     geo = _geometry(points)
     out = np.full((C, P, 2), np.nan)
@@ -282,13 +278,17 @@ def find_frame(
     n_static = np.zeros(C, np.int64)
     fits = np.zeros(C, np.int64)
     status = []
+    pk = np.ones(uv.shape[0]) if peak is None else np.asarray(peak, np.float64).reshape(-1)
+    if pk.shape != (uv.shape[0],):
+        raise CalibrationError(f"peak must have one value per blob ({uv.shape[0]},)")
     for c in range(C):
-        per_image = []
+        per_image, per_peak = [], []
         for f in np.flatnonzero(image_ok[:, c]):
             lo, hi = int(offsets[f * C + c]), int(offsets[f * C + c + 1])
             per_image.append(uv[lo:hi][blob_ok[lo:hi]])
+            per_peak.append(pk[lo:hi][blob_ok[lo:hi]])
         images[c] = len(per_image)
-        centre, sd = _static_blobs(per_image) if per_image else (np.zeros((0, 2)), np.zeros(0))
+        centre, sd, bright = _static_blobs(per_image, per_peak)
         n_static[c] = centre.shape[0]
         if centre.shape[0] < P:
             status.append(NOT_FOUND)
@@ -298,6 +298,11 @@ def find_frame(
             continue
         ok = _fits(centre, geo, P)
         fits[c] = ok.shape[0]
+        if ok.shape[0] > 1 and peak is not None:
+            dimmest = bright[ok].min(axis=1)
+            ranked = np.sort(dimmest)
+            if ranked[-1] >= BRIGHTER * ranked[-2]:
+                ok = ok[[int(np.argmax(dimmest))]]
         if ok.shape[0] != 1:
             status.append(AMBIGUOUS if ok.shape[0] else NOT_FOUND)
             continue

@@ -7,12 +7,15 @@ camera, :func:`find_wand` picks the wand's markers out of them, or drops the ima
 - **3 markers** (two ends and a middle marker off the centre, at ``middle_ratio`` of the
   length from end A): every triple of usable blobs is tested. The one between the other
   two is the middle; the triple is the wand when the middle lies on the ends' line
-  (within ``COLLINEAR_PX`` + ``COLLINEAR_REL`` of the image length), the image is at
+  (within ``COLLINEAR_PX`` plus ``COLLINEAR_REL`` of the image length), the image is at
   least ``MIN_LENGTH_PX`` long, and the middle's place along it is ``middle_ratio``
   within ``RATIO_TOLERANCE``. Under perspective the ratio of three collinear points is
   not invariant (a 500 mm wand 2.5 m away pointing into depth moves it by about 0.05),
   hence the tolerance. End A is the end nearer the middle marker, so the ends are the
-  same physical ends in every camera. An image is used when exactly one triple passes.
+  same physical ends in every camera. An image is used when exactly one triple passes,
+  or (with the blobs' peaks given) when one of several is clearly the brightest: its
+  dimmest blob ``BRIGHTER`` times brighter than the dimmest of every other (a floor
+  reflection of the whole wand is a second wand, dimmer).
 - **2 markers**: an image is used when it holds exactly two usable blobs. Two identical
   markers carry no name; end A is taken as the upper one in the image (cameras stand
   upright and look down at the volume), and images where the wand lies within
@@ -37,6 +40,7 @@ from numpy.typing import NDArray
 from spotlab.core.errors import CalibrationError
 
 __all__ = [
+    "BRIGHTER",
     "COLLINEAR_PX",
     "COLLINEAR_REL",
     "LEVEL_DEG",
@@ -44,8 +48,11 @@ __all__ = [
     "MIN_LENGTH_PX",
     "RATIO_TOLERANCE",
     "WandImages",
+    "WandSurvey",
+    "checked_blobs",
     "find_wand",
     "middle_places",
+    "survey_wand",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -55,7 +62,7 @@ IntArray = NDArray[np.int64]
 #: Largest distance (px) of the middle marker from the ends' line, plus COLLINEAR_REL of
 #: the image length (lens distortion bends the line a little).
 COLLINEAR_PX = 1.5
-COLLINEAR_REL = 0.02
+COLLINEAR_REL = 0.005
 #: Shortest wand image (px) between the ends: shorter, the ratio says little.
 MIN_LENGTH_PX = 20.0
 #: Largest difference between the middle marker's place along the image and its place
@@ -63,6 +70,9 @@ MIN_LENGTH_PX = 20.0
 RATIO_TOLERANCE = 0.07
 #: Images with more usable blobs than this are dropped as ambiguous.
 MAX_BLOBS = 12
+#: Of several fitting triples, one whose dimmest blob is this many times brighter than
+#: every other's is the wand.
+BRIGHTER = 1.5
 #: Two-marker wand: images whose wand lies within this angle of the horizontal (deg).
 LEVEL_DEG = 25.0
 
@@ -80,10 +90,6 @@ class WandImages:
         NaN for a 2-marker wand).
     used, ambiguous, missing, unusable : ndarray of int64, shape (C,)
         Images per camera in each case (see the module docstring); they add up to F.
-    ratio_seen : float
-        3 markers: the median place of the middle marker along the wand's image, over
-        the images of exactly three usable, collinear blobs whatever their ratio (what
-        the recording says the wand's ratio is); NaN for 2 markers or no such image.
     """
 
     ends: FloatArray
@@ -92,6 +98,26 @@ class WandImages:
     ambiguous: IntArray
     missing: IntArray
     unusable: IntArray
+
+
+@dataclass(frozen=True)
+class WandSurvey:
+    """What a wand recording's images say about the wand, before looking for it.
+
+    Attributes
+    ----------
+    two : int
+        Images of exactly two usable blobs at least ``MIN_LENGTH_PX`` apart.
+    three_in_line : int
+        Images of exactly three usable blobs on one line (collinearity as for the wand).
+    ratio_seen : float
+        Median place of the middle blob along the line in those images (from the nearer
+        end, fractions of the image length; NaN when there is none): the wand's middle
+        ratio as the recording shows it, give or take perspective.
+    """
+
+    two: int
+    three_in_line: int
     ratio_seen: float
 
 
@@ -146,22 +172,28 @@ def middle_places(
     return a, b, m, place, cross / np.sqrt(length2)
 
 
-def _three(uv: FloatArray, ratio: float) -> tuple[FloatArray | None, int, float]:
-    """The wand (A, B, M) (3, 2) among one image's usable blobs, how many triples fit,
-    and the middle's place when the image holds exactly one collinear triple (else NaN)."""
+def _in_line(a: FloatArray, b: FloatArray, off: FloatArray) -> BoolArray:
+    """Triples whose middle is on the ends' line and whose image is long enough."""
+    length = np.linalg.norm(b - a, axis=1)
+    return np.asarray((length >= MIN_LENGTH_PX) & (off <= COLLINEAR_PX + COLLINEAR_REL * length))
+
+
+def _three(uv: FloatArray, ratio: float, peak: FloatArray | None) -> tuple[FloatArray | None, int]:
+    """The wand (A, B, M) (3, 2) among one image's usable blobs, and how many triples fit."""
     n = uv.shape[0]
     if n < 3:
-        return None, 0, np.nan
+        return None, 0
     idx = _triples(n)
     a, b, m, place, off = middle_places(uv[idx])
-    length = np.linalg.norm(b - a, axis=1)
-    line = (length >= MIN_LENGTH_PX) & (off <= COLLINEAR_PX + COLLINEAR_REL * length)
-    seen = float(place[0]) if n == 3 and line[0] else np.nan
-    hits = np.flatnonzero(line & (np.abs(place - ratio) <= RATIO_TOLERANCE))
+    hits = np.flatnonzero(_in_line(a, b, off) & (np.abs(place - ratio) <= RATIO_TOLERANCE))
+    if hits.size > 1 and peak is not None:
+        dimmest = np.sort(peak[idx[hits]].min(axis=1))
+        if dimmest[-1] >= BRIGHTER * dimmest[-2]:
+            hits = hits[[int(np.argmax(peak[idx[hits]].min(axis=1)))]]
     if hits.size != 1:
-        return None, int(hits.size), seen
+        return None, int(hits.size)
     k = int(hits[0])
-    return np.stack([a[k], b[k], m[k]]), 1, seen
+    return np.stack([a[k], b[k], m[k]]), 1
 
 
 def _two(uv: FloatArray) -> tuple[FloatArray | None, bool]:
@@ -186,6 +218,7 @@ def find_wand(
     middle_ratio: float | None = None,
     usable_blob: BoolArray | None = None,
     usable_image: BoolArray | None = None,
+    peak: FloatArray | None = None,
 ) -> WandImages:
     """Find the wand's markers among the blobs of every frame and camera.
 
@@ -206,6 +239,9 @@ def find_wand(
         Blobs that may be wand markers (default: all).
     usable_image : ndarray of bool, shape (F, C), optional
         Images to look at (default: all).
+    peak : ndarray, shape (N,), optional
+        The blobs' peak grey levels: of several fitting triples the clearly brightest is
+        taken (see the module docstring); without them such an image is ambiguous.
 
     Returns
     -------
@@ -217,9 +253,6 @@ def find_wand(
         For 2 or 3 markers not given, a middle ratio outside (0, 0.5), or arrays whose
         sizes do not match.
     """
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    offsets = np.asarray(offsets, dtype=np.int64)
-    C = int(n_cameras)
     if markers not in (2, 3):
         raise CalibrationError(f"a wand has 2 or 3 markers, not {markers}")
     if markers == 3 and (middle_ratio is None or not 0.0 < middle_ratio < 0.5 - RATIO_TOLERANCE):
@@ -228,20 +261,16 @@ def find_wand(
             f"the nearer end over the length must be in (0, {0.5 - RATIO_TOLERANCE:g}), "
             f"got {middle_ratio}"
         )
-    if C < 1 or (offsets.size - 1) % C or offsets[-1] != uv.shape[0]:
-        raise CalibrationError(
-            f"offsets ({offsets.size}) do not fit {C} cameras and {uv.shape[0]} blobs"
-        )
-    F = (offsets.size - 1) // C
-    blob_ok = np.ones(uv.shape[0], bool) if usable_blob is None else np.asarray(usable_blob)
-    image_ok = np.ones((F, C), bool) if usable_image is None else np.asarray(usable_image)
-    if blob_ok.shape != (uv.shape[0],) or image_ok.shape != (F, C):
-        raise CalibrationError("usable_blob must be (N,) and usable_image (F, C)")
+    uv, offsets, C, F, blob_ok, image_ok = checked_blobs(
+        uv, offsets, n_cameras, usable_blob, usable_image
+    )
+    pk = None if peak is None else np.asarray(peak, dtype=np.float64).reshape(-1)
+    if pk is not None and pk.shape != (uv.shape[0],):
+        raise CalibrationError(f"peak must have one value per blob ({uv.shape[0]},)")
     ends = np.full((F, C, 2, 2), np.nan)
     middle = np.full((F, C, 2), np.nan)
     counts = {k: np.zeros(C, np.int64) for k in ("used", "ambiguous", "missing", "unusable")}
     ratio = float(middle_ratio) if middle_ratio is not None else 0.0
-    places: list[float] = []
     for f in range(F):
         for c in range(C):
             if not image_ok[f, c]:
@@ -253,10 +282,8 @@ def find_wand(
                 counts["ambiguous"][c] += 1
                 continue
             if markers == 3:
-                found, hits, seen = _three(pts, ratio)
+                found, hits = _three(pts, ratio, None if pk is None else pk[lo:hi][blob_ok[lo:hi]])
                 ambiguous = hits > 1
-                if np.isfinite(seen):
-                    places.append(seen)
             else:
                 found, ambiguous = _two(pts)
                 ambiguous = ambiguous or pts.shape[0] > 2
@@ -267,5 +294,60 @@ def find_wand(
             ends[f, c] = found[:2]
             if markers == 3:
                 middle[f, c] = found[2]
-    ratio_seen = float(np.median(places)) if places else np.nan
-    return WandImages(ends, middle, **counts, ratio_seen=ratio_seen)
+    return WandImages(ends, middle, **counts)
+
+
+def checked_blobs(
+    uv: FloatArray, offsets: IntArray, n_cameras: int, usable_blob: BoolArray | None,
+    usable_image: BoolArray | None,
+) -> tuple[FloatArray, IntArray, int, int, BoolArray, BoolArray]:  # fmt: skip
+    """Arrays as float/int, C, F and the two masks (all true when not given)."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    offsets = np.asarray(offsets, dtype=np.int64)
+    C = int(n_cameras)
+    if C < 1 or (offsets.size - 1) % C or offsets[-1] != uv.shape[0]:
+        raise CalibrationError(
+            f"offsets ({offsets.size}) do not fit {C} cameras and {uv.shape[0]} blobs"
+        )
+    F = (offsets.size - 1) // C
+    blob_ok = np.ones(uv.shape[0], bool) if usable_blob is None else np.asarray(usable_blob)
+    image_ok = np.ones((F, C), bool) if usable_image is None else np.asarray(usable_image)
+    if blob_ok.shape != (uv.shape[0],) or image_ok.shape != (F, C):
+        raise CalibrationError("usable_blob must be (N,) and usable_image (F, C)")
+    return uv, offsets, C, F, blob_ok, image_ok
+
+
+def survey_wand(
+    uv: FloatArray,
+    offsets: IntArray,
+    n_cameras: int,
+    *,
+    usable_blob: BoolArray | None = None,
+    usable_image: BoolArray | None = None,
+) -> WandSurvey:
+    """Count the images that look like a 2-marker and like a 3-marker wand.
+
+    Parameters are those of :func:`find_wand`.
+
+    Returns
+    -------
+    WandSurvey
+    """
+    uv, offsets, C, _, blob_ok, image_ok = checked_blobs(
+        uv, offsets, n_cameras, usable_blob, usable_image
+    )
+    two = 0
+    triples = []
+    for f, c in zip(*np.nonzero(image_ok), strict=True):
+        lo, hi = int(offsets[f * C + c]), int(offsets[f * C + c + 1])
+        pts = uv[lo:hi][blob_ok[lo:hi]]
+        if pts.shape[0] == 2 and np.hypot(*(pts[1] - pts[0])) >= MIN_LENGTH_PX:
+            two += 1
+        elif pts.shape[0] == 3:
+            triples.append(pts)
+    if not triples:
+        return WandSurvey(two, 0, np.nan)
+    a, b, _, place, off = middle_places(np.stack(triples))
+    line = _in_line(a, b, off)
+    seen = float(np.median(place[line])) if line.any() else np.nan
+    return WandSurvey(two, int(line.sum()), seen)

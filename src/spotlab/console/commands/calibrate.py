@@ -1,7 +1,9 @@
 """``spotlab calibrate``: wand self-calibration of a rig from observations.
 
 Reads observations (npz arrays, CSV tables, or a wand-dance recording with a static
-recording of the reference object; see :mod:`spotlab.console.calibration_inputs`), runs
+recording of the reference object; see :mod:`spotlab.console.calibration_inputs` for
+SELSPOT recordings and :mod:`spotlab.console.blob_calibration_inputs` for video-centroid
+ones, whose wand and reference markers are found among the blobs), runs
 :func:`spotlab.calibration.wand_calibrate` from a cold start, writes the calibration
 (TOML in the anipose / Pose2Sim layout), the quality report (JSON) and its figure (PNG).
 """
@@ -14,7 +16,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from spotlab.calibration import wand_calibrate, write_report_figure
+from spotlab.calibration import WandCalibration, wand_calibrate, write_report_figure
+from spotlab.console.blob_calibration_inputs import BlobCalibrationInputs, load_blob_recordings
+from spotlab.console.blob_trajectories import is_blob_recording
 from spotlab.console.calibration_inputs import (
     WandObservations,
     load_csv,
@@ -38,12 +42,34 @@ def add_parser(sub: Any) -> None:
         "(.spj, with --wand-markers, --frame-recording, --frame-markers, --frame-points)",
     )
     p.add_argument("--out", type=Path, required=True, help="calibration file to write (.toml)")
-    p.add_argument("--wand-length", type=float, help="wand length in mm (or in the npz)")
+    p.add_argument(
+        "--wand-length",
+        type=float,
+        help="wand length in mm, between its end markers (or in the npz)",
+    )
+    p.add_argument(
+        "--wand-middle",
+        type=float,
+        metavar="MM",
+        help="video-centroid recordings: a 3-marker wand's middle marker, MM from end A "
+        "(default: as the recording shows)",
+    )
     p.add_argument("--frame", type=Path, help="reference-object CSV table (CSV input)")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), help="pixels")
-    p.add_argument("--wand-markers", type=int, nargs=2, metavar=("A", "B"))
+    p.add_argument(
+        "--wand-markers",
+        type=int,
+        nargs=2,
+        metavar=("A", "B"),
+        help="SELSPOT recordings: marker numbers of the wand's ends",
+    )
     p.add_argument("--frame-recording", type=Path)
-    p.add_argument("--frame-markers", type=int, nargs="+")
+    p.add_argument(
+        "--frame-markers",
+        type=int,
+        nargs="+",
+        help="SELSPOT recordings: marker numbers of the reference object's markers",
+    )
     p.add_argument("--frame-points", type=Path, help="CSV with X, Y, Z (mm) per frame marker")
     p.add_argument("--report", type=Path, help="quality report (JSON); default OUT.report.json")
     p.add_argument("--figure", type=Path, help="quality figure (PNG); default OUT.report.png")
@@ -52,10 +78,44 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
+#: Largest relative difference between the wand length triangulated freely with the
+#: calibrated rig (the L-frame sets the scale) and ``--wand-length`` (video recordings).
+SCALE_MISMATCH = 0.01
+
+
+def _load_blobs(args: argparse.Namespace) -> BlobCalibrationInputs:
+    """A video-centroid wand dance and static recording (see the module docstring)."""
+    given = [
+        f"--{n.replace('_', '-')}"
+        for n in ("wand_markers", "frame_markers")
+        if getattr(args, n) is not None
+    ]
+    if given:
+        raise CommandError(
+            f"{', '.join(given)} name SELSPOT markers; in a video-centroid recording the wand "
+            "and the reference object are found by their geometry (see --wand-middle)"
+        )
+    missing = [
+        f"--{n.replace('_', '-')}"
+        for n in ("frame_recording", "frame_points", "wand_length")
+        if getattr(args, n) is None
+    ]
+    if missing:
+        raise CommandError(f"video-centroid recording input needs {', '.join(missing)}")
+    if not args.frame_recording.exists():
+        raise CommandError(f"{args.frame_recording}: no such file")
+    return load_blob_recordings(
+        args.observations, args.frame_recording, args.frame_points,
+        wand_length=args.wand_length, wand_middle=args.wand_middle, image_size=args.image_size,
+    )  # fmt: skip
+
+
 def _load(args: argparse.Namespace) -> WandObservations:
     path: Path = args.observations
     if not path.exists():
         raise CommandError(f"{path}: no such file")
+    if args.wand_middle is not None:
+        raise CommandError("--wand-middle is for video-centroid (blobs2d) recordings")
     suffix = path.suffix.lower()
     if suffix == ".npz":
         return load_npz(path)
@@ -74,8 +134,37 @@ def _load(args: argparse.Namespace) -> WandObservations:
     raise CommandError(f"{path}: unknown observation format {suffix!r} (npz, csv or spj)")
 
 
+def _check_scale(result: WandCalibration, length: float) -> None:
+    """The wand measured with the calibrated rig (scaled by the L-frame) must be ``length``."""
+    measured = float(result.report["wand"]["mean_mm"])
+    if not abs(measured / length - 1.0) <= SCALE_MISMATCH:
+        raise CommandError(
+            f"the wand length does not match the recording: with the reference object "
+            f"setting the scale the wand measures {measured:.1f} mm, not --wand-length "
+            f"{length:g} mm; check the wand's length and the reference object's coordinates"
+        )
+
+
+def _print_finder(found: BlobCalibrationInputs) -> None:
+    summary = found.summary()
+    wand = f"{found.markers} markers"
+    if found.middle_ratio is not None:
+        wand += f", middle marker at {found.middle_ratio:.3f} of the length"
+    w, h = summary["image_size"]
+    print(f"  wand: {wand}; image size {w} x {h} px ({found.image_size_source})")
+    for cam in summary["cameras"]:
+        print(
+            f"  {cam['name']}: wand found in {cam['wand_used']} frames, dropped "
+            f"{cam['wand_ambiguous']} ambiguous, {cam['wand_missing']} missing a marker, "
+            f"{cam['wand_unusable']} camera offline or overflowing; reference object "
+            f"{cam['frame']}"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
-    obs = _load(args)
+    path: Path = args.observations
+    found = _load_blobs(args) if is_blob_recording(path) else None
+    obs = found.observations if found is not None else _load(args)
     length = args.wand_length if args.wand_length is not None else obs.wand_length
     if length is None:
         raise CommandError("the wand length is not known: give --wand-length MM")
@@ -95,17 +184,22 @@ def run(args: argparse.Namespace) -> int:
         distortion=() if args.no_distortion else ("k1", "k2", "p1", "p2", "k3"),
         progress=progress,
     )
+    if found is not None:
+        _check_scale(result, length)
     out: Path = args.out
     report_path = args.report or out.with_suffix(".report.json")
     figure_path = args.figure or out.with_suffix(".report.png")
     result.rig.save(out)
-    report_path.write_text(json.dumps(result.report, indent=2) + "\n")
+    extra = {"finder": found.summary()} if found is not None else {}
+    report_path.write_text(json.dumps({**result.report, **extra}, indent=2) + "\n")
     write_report_figure(
         result.rig, obs.wand, result.wand_residuals, result.inliers, result.report, figure_path
     )
     if args.json:
-        print(json.dumps({**result.report, "calibration": str(out)}))
+        print(json.dumps({**result.report, **extra, "calibration": str(out)}))
         return 0
+    if found is not None:
+        _print_finder(found)
     rep = result.report
     for cam in rep["cameras"]:
         print(
