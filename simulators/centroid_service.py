@@ -164,7 +164,7 @@ CENTROID_MOTIONS = ("walk", "wand", "lframe")
 #: Where the wand's centre goes: (centre, half-size) of the volume, mm. The wand is
 #: waved 2.5 times as fast as the PSD simulator's (``tempo``): a few seconds cover the
 #: volume and most of every camera's image.
-WAND_VOLUME = ((0.0, 0.0, 1000.0), (1400.0, 1400.0, 650.0))
+WAND_VOLUME = ((0.0, 0.0, 1100.0), (1500.0, 1500.0, 900.0))
 WAND_TEMPO = 2.5
 #: A 3-marker wand's middle marker, from end A, in wand lengths (off-centre: the
 #: ends are told apart).
