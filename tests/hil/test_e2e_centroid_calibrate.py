@@ -27,7 +27,7 @@ from spotlab.geometry import Rig
 from spotlab.reconstruction import triangulate
 
 CAMERAS, WAND_LENGTH_MM = 8, 500.0
-WAND_S, FRAME_S, WALK_S = 10.0, 3.0, 2.0
+WAND_S, FRAME_S, WALK_S = 15.0, 4.0, 2.0
 #: Recordings that end without a reply to STOP: (test_e2e_centroid_reconstruct.py)
 #: on a busy machine the simulator can fall behind at the end; what arrived is recorded.
 ENDING = ("no reply to STOP", "device gone when the recording ended")
@@ -45,62 +45,44 @@ class Lab:
     walk_truth: Path
 
 
-def _sim(folder: Path, name: str, *args: object) -> tuple[subprocess.Popen[bytes], str]:
-    out, err = folder / f"{name}.stdout", folder / f"{name}.stderr"
-    proc = spawn_cli(["sim", "centroid", "--pty", "--cameras", CAMERAS, *args], out, err)
-    return proc, first_line(out, proc, err, timeout=30.0)
-
-
-def _record(port: str, out: Path, seconds: float, rate: float) -> list[object]:
-    return [
-        "record", "--device", f"centroid={port}", "--cameras", CAMERAS, "--rate", rate,
-        "--seconds", seconds, "--out", out,
-    ]  # fmt: skip
+def _record(folder: Path, out: Path, seconds: float, rate: float, *sim_args: object) -> None:
+    """``spotlab sim centroid`` of one scene, recorded by ``spotlab record``, then stopped."""
+    name = out.stem
+    sim_out, sim_err = folder / f"{name}-sim.stdout", folder / f"{name}-sim.stderr"
+    sim = spawn_cli(
+        ["sim", "centroid", "--pty", "--cameras", CAMERAS, "--rate", rate, *sim_args],
+        sim_out, sim_err,
+    )  # fmt: skip
+    try:
+        port = first_line(sim_out, sim, sim_err, timeout=30.0)
+        result = run_cli(
+            "record", "--device", f"centroid={port}", "--cameras", CAMERAS, "--rate", rate,
+            "--seconds", seconds, "--out", out, timeout=60,
+        )  # fmt: skip
+        assert result.returncode == 0 or any(e in result.stderr for e in ENDING), result.stderr
+    finally:
+        stop_process(sim)
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Lab:
+    """One scene after the other (three simulators at once starve on a busy machine); the
+    cameras stay put between them, each simulator has its own seed (its own trial)."""
     folder = tmp_path_factory.mktemp("centroid-calibrate")
     lab = Lab(
         folder, folder / "wand.spj", folder / "frame.spj", folder / "walk.spj",
         folder / "lframe.csv", folder / "true-rig.toml", folder / "walk-truth.npz",
     )  # fmt: skip
-    procs: list[subprocess.Popen[bytes]] = []
-    try:
-        # The cameras stay put: each simulator has its own seed (its own trial).
-        wand, wand_port = _sim(folder, "wand", "--motion", "wand", "--rate", 100, "--seed", 1)
-        procs.append(wand)
-        frame, frame_port = _sim(
-            folder, "frame", "--motion", "lframe", "--rate", 300, "--seed", 2,
-            "--frame-points-out", lab.frame_points,
-        )  # fmt: skip
-        procs.append(frame)
-        walk, walk_port = _sim(
-            folder, "walk", "--motion", "walk", "--rate", 100, "--seed", 3,
-            "--truth", lab.walk_truth, "--rig-out", lab.true_rig,
-        )  # fmt: skip
-        procs.append(walk)
-        side = [
-            spawn_cli(
-                _record(port, out, seconds, rate),
-                folder / f"{out.stem}-record.stdout",
-                folder / f"{out.stem}-record.stderr",
-            )
-            for port, out, seconds, rate in (
-                (frame_port, lab.frame, FRAME_S, 300),
-                (walk_port, lab.walk, WALK_S, 100),
-            )
-        ]
-        procs += side
-        result = run_cli(*_record(wand_port, lab.wand, WAND_S, 100), timeout=60)
-        assert result.returncode == 0 or any(e in result.stderr for e in ENDING), result.stderr
-        for proc, out in zip(side, (lab.frame, lab.walk), strict=True):
-            code = proc.wait(timeout=30)
-            err = (folder / f"{out.stem}-record.stderr").read_text()
-            assert code == 0 or any(e in err for e in ENDING), err
-    finally:
-        for proc in reversed(procs):
-            stop_process(proc)
+    _record(folder, lab.wand, WAND_S, 100, "--motion", "wand", "--seed", 1)
+    _record(
+        folder, lab.frame, FRAME_S, 100, "--motion", "lframe", "--seed", 2,
+        "--frame-points-out", lab.frame_points,
+    )  # fmt: skip
+    # Scoring data: the walk's truth and the true rig are read only at the very end.
+    _record(
+        folder, lab.walk, WALK_S, 100, "--motion", "walk", "--seed", 3,
+        "--truth", lab.walk_truth, "--rig-out", lab.true_rig,
+    )  # fmt: skip
     return lab
 
 
@@ -152,6 +134,7 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     assert finder["wand_markers"] == 3 and finder["image_size"] == [1280, 1024]
     assert abs(finder["middle_ratio"] - 0.4) < 0.01  # as the recording shows it
     decoded = read_blob_recording(lab.wand).blobs.n_frames
+    print(f"wand: {decoded} frames, used per camera {[c['wand_used'] for c in finder['cameras']]}")
     for cam in finder["cameras"]:
         parts = ("wand_used", "wand_ambiguous", "wand_missing", "wand_unusable")
         assert sum(cam[k] for k in parts) == decoded, cam
