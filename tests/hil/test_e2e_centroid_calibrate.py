@@ -86,11 +86,9 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Lab:
     return lab
 
 
-def _calibrate(
-    lab: Lab, out: Path, *extra: object, length: float = WAND_LENGTH_MM
-) -> subprocess.CompletedProcess[str]:
+def _calibrate(lab: Lab, out: Path, *extra: object) -> subprocess.CompletedProcess[str]:
     return run_cli(
-        "calibrate", lab.wand, "--wand-length", length, "--frame-recording", lab.frame,
+        "calibrate", lab.wand, "--wand-length", WAND_LENGTH_MM, "--frame-recording", lab.frame,
         "--frame-points", lab.frame_points, "--out", out, *extra, timeout=90,
     )  # fmt: skip
 
@@ -161,11 +159,11 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
 
 @pytest.mark.timeout(180)
 def test_a_wand_that_does_not_match_the_recordings_is_one_clear_error(lab: Lab) -> None:
+    # (A wand length that the L-frame's size does not confirm needs a whole adjustment
+    # to show: tests/unit/console/test_blob_calibration.py, and docs/calibration.md.)
     out = lab.folder / "bad.toml"
-    longer = _calibrate(lab, out, length=520)
-    assert_one_clear_error(longer, "wand length does not match", "as if the wand were 500 mm")
     middle = _calibrate(lab, out, "--wand-middle", 250)
-    assert_one_clear_error(middle, "does not match", "--wand-middle 250", "0.400")
+    assert_one_clear_error(middle, "does not match", "--wand-middle 250", "shows it at 0.")
     moving = run_cli(
         "calibrate", lab.wand, "--wand-length", WAND_LENGTH_MM, "--frame-recording", lab.wand,
         "--frame-points", lab.frame_points, "--out", out,
