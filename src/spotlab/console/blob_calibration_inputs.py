@@ -12,7 +12,8 @@ CEN hub (docs/protocols/centroid.md), and the object's published marker coordina
   shows). The markers are found frame by frame by
   :func:`spotlab.calibration.wand_finder.find_wand`; an image that is ambiguous or
   misses a marker is dropped and counted; of two fitting candidates the clearly
-  brighter is taken (a floor reflection is dimmer).
+  brighter is taken (a floor reflection is dimmer). A 2-marker wand's ends are named by
+  image height at first, then again with the first calibration (:meth:`relabel`).
 - The reference object: its markers are found in each camera's static blobs by
   :func:`spotlab.calibration.frame_finder.find_frame` and averaged over the recording.
 - Cameras are the hub's, in its order: camera ``c`` (0-based on the wire) is ``cam{c+1}``.
@@ -23,7 +24,7 @@ CEN hub (docs/protocols/centroid.md), and the object's published marker coordina
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +38,13 @@ from spotlab.calibration.wand_finder import (
     find_wand,
     survey_wand,
 )
+from spotlab.calibration.wand_relabel import relabel_two_ends
 from spotlab.console.blob_trajectories import read_blob_recording
 from spotlab.console.calibration_inputs import WandObservations
 from spotlab.console.errors import CommandError
 from spotlab.console.tables import column, read_table
 from spotlab.drivers.centroid import BLOB_MERGED, BlobFrames
+from spotlab.geometry import Rig
 
 __all__ = ["RATIO_MISMATCH", "SENSOR_SIZES", "BlobCalibrationInputs", "load_blob_recordings"]
 
@@ -81,6 +84,11 @@ class BlobCalibrationInputs:
         The middle ratio as the recording shows it (NaN for 2 markers).
     image_size_source : str
         ``"--image-size"`` or how it was chosen.
+    wand_blobs : BlobFrames
+        The wand recording's blobs.
+    relabelled : bool
+        A 2-marker wand's ends named again with a first calibration
+        (:meth:`relabel`).
     """
 
     observations: WandObservations
@@ -90,6 +98,19 @@ class BlobCalibrationInputs:
     middle_ratio: float | None
     ratio_seen: float
     image_size_source: str
+    wand_blobs: BlobFrames
+    relabelled: bool = False
+
+    def relabel(self, rig: Rig, wand_ends: FloatArray) -> BlobCalibrationInputs:
+        """A 2-marker wand's ends named by a first calibration's wand ends (F, 2, 3) mm
+        (:func:`~spotlab.calibration.wand_relabel.relabel_two_ends`)."""
+        blob_ok, image_ok = _usable(self.wand_blobs)
+        wand = relabel_two_ends(
+            self.wand_blobs.uv, self.wand_blobs.offsets, rig, wand_ends,
+            usable_blob=blob_ok, usable_image=image_ok,
+        )  # fmt: skip
+        obs = replace(self.observations, wand=wand.ends)
+        return replace(self, observations=obs, wand=wand, relabelled=True)
 
     def summary(self) -> dict[str, Any]:
         """JSON-safe figures: per camera the wand images used and dropped, the frame."""
@@ -109,6 +130,7 @@ class BlobCalibrationInputs:
             )
         return {
             "wand_markers": self.markers,
+            "ends_relabelled": self.relabelled,
             "middle_ratio": self.middle_ratio,
             "middle_ratio_seen": None if np.isnan(self.ratio_seen) else self.ratio_seen,
             "image_size": [int(v) for v in self.observations.image_size],
@@ -261,4 +283,4 @@ def load_blob_recordings(
             f"object of {frame_points_csv}, standing still?"
         )
     obs = WandObservations(wand.ends, frame.uv, points, size)
-    return BlobCalibrationInputs(obs, wand, frame, markers, ratio, seen, source)
+    return BlobCalibrationInputs(obs, wand, frame, markers, ratio, seen, source, wand_rec)

@@ -167,6 +167,8 @@ def _check_scale(rig: Rig, obs: WandObservations, length: float) -> None:
 def _print_finder(found: BlobCalibrationInputs) -> None:
     summary = found.summary()
     wand = f"{found.markers} markers"
+    if found.relabelled:
+        wand += ", ends named by a first calibration"
     if found.middle_ratio is not None:
         wand += f", middle marker at {found.middle_ratio:.3f} of the length"
     w, h = summary["image_size"]
@@ -193,16 +195,20 @@ def run(args: argparse.Namespace) -> int:
         if verbose:
             print(f"calibrate: {message}", file=sys.stderr, flush=True)
 
+    distortion = () if args.no_distortion else ("k1", "k2", "p1", "p2", "k3")
     result = wand_calibrate(
-        obs.wand,
-        length,
-        obs.frame,
-        obs.frame_points,
-        obs.image_size,
-        names=obs.names,
-        distortion=() if args.no_distortion else ("k1", "k2", "p1", "p2", "k3"),
-        progress=progress,
-    )
+        obs.wand, length, obs.frame, obs.frame_points, obs.image_size, names=obs.names,
+        distortion=distortion, progress=progress,
+    )  # fmt: skip
+    if found is not None and found.markers == 2:
+        # Two identical markers: name the ends again with this first rig, then adjust again.
+        progress("2-marker wand: naming its ends with the first calibration")
+        found = found.relabel(result.rig, result.wand_ends)
+        obs = found.observations
+        result = wand_calibrate(
+            obs.wand, length, obs.frame, obs.frame_points, obs.image_size, names=obs.names,
+            distortion=distortion, progress=progress,
+        )  # fmt: skip
     if found is not None:
         _check_scale(result.rig, obs, length)
     out: Path = args.out
