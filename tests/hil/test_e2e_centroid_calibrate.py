@@ -136,7 +136,7 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     for cam in finder["cameras"]:
         parts = ("wand_used", "wand_ambiguous", "wand_missing", "wand_unusable")
         assert sum(cam[k] for k in parts) == decoded, cam
-        # Measured (seed 1, 1003 frames): 97.6-100 % used per camera; the rest miss a
+        # Measured (seed 1, 1501 frames): 1471-1499 used per camera; the rest miss a
         # marker (merged or hidden), a few are ambiguous.
         assert cam["wand_used"] > 0.9 * decoded, cam
         assert cam["frame"] == "found", cam
@@ -154,6 +154,8 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     ratio = rms["calibrated"] / rms["true"]
     print(f"{both.sum()} body marker-frames: RMS {rms} mm, ratio {ratio:.4f}")
     assert both.sum() > 1000
+    # Measured: 1.008 and 1.009 (two runs); in process, 15 s of wand, seeds 7, 1, 9, 10:
+    # 1.011-1.024 (docs/calibration.md). The target: within 5 % of the true rig's.
     assert ratio < 1.05
 
 

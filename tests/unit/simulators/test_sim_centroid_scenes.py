@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from spotlab.console.cli import main
 from spotlab.simulators.centroid import CentroidDevice
 from spotlab.simulators.centroid_service import (
     WAND_MIDDLE,
@@ -85,3 +86,20 @@ def test_the_l_frame_is_static_and_its_published_points_are_written(tmp_path: Pa
 def test_bad_scene_options_are_refused(query: str, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         centroid_options_from_url(f"sim://centroid?{query}")
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--motion", "gait"], "--motion 'gait': the centroid simulator plays walk, wand, lframe"),
+        (["--motion", "wand", "--markers", "5"], "markers must be 2 to 3 for the wand motion"),
+        (["--motion", "wand", "--model-out", "m.json"], "--model-out"),
+        (["--motion", "wand", "--wand-length", "10"], "wand length must be 50 to 3000 mm"),
+    ],
+)
+def test_bad_scene_arguments_are_one_clear_line(
+    args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["sim", "centroid", "--pty", *args]) != 0
+    err = capsys.readouterr().err
+    assert err.count("spotlab: error:") == 1 and message in err, err
