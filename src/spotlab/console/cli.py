@@ -30,6 +30,7 @@ COMMANDS: tuple[str, ...] = (
     "replay",
     "calibrate",
     "reconstruct",
+    "model",
     "export",
     "demo",
     "udev",
