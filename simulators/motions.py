@@ -156,11 +156,27 @@ class Delayed(Motion):
 
 
 class WandDance(Motion):
-    """Two LEDs ``length`` mm apart on a wand waved through the volume.
+    """Two or three markers on a wand ``length`` mm long waved through the volume.
 
     The wand centre follows a sum of slow sines inside ``centre +- extent``;
     the wand turns about the vertical and tilts up and down, so that it covers
-    many directions. Marker 0 and 1 are the wand ends.
+    many directions. Marker 0 and 1 are the wand ends (``WAND_A``, ``WAND_B``);
+    with ``middle_mm``, marker 2 (``WAND_M``) sits on the wand ``middle_mm`` from
+    end A, as on a passive three-marker wand.
+
+    Parameters
+    ----------
+    length : float
+        Distance between the ends (mm).
+    centre, extent : tuple of 3 floats
+        Middle of the volume the wand centre sweeps and its half-size (mm).
+    seed : int
+        Seed of the sines' frequencies and phases.
+    middle_mm : float, optional
+        Distance of a third, middle marker from end A (mm), ``0 < middle_mm < length``.
+    tempo : float
+        How fast the operator waves: the motion at time ``t`` is the tempo-1 motion's
+        at ``tempo * t``.
     """
 
     def __init__(
@@ -169,6 +185,8 @@ class WandDance(Motion):
         centre: tuple[float, float, float] = (0.0, 0.0, 1000.0),
         extent: tuple[float, float, float] = (800.0, 800.0, 450.0),
         seed: int = 0,
+        middle_mm: float | None = None,
+        tempo: float = 1.0,
     ) -> None:
         rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3A4D]))
         self.length = float(length)
@@ -178,19 +196,26 @@ class WandDance(Motion):
         self._phase = rng.uniform(0, 2 * np.pi, size=(2, 3))
         self._yaw_rate = rng.uniform(0.5, 0.9) * rng.choice([-1.0, 1.0])  # rad/s
         self._tilt = (rng.uniform(0.2, 0.4), rng.uniform(0, 2 * np.pi))  # Hz, phase
-        self.n_markers = 2
-        self.labels = ("WAND_A", "WAND_B")
+        if middle_mm is not None and not 0.0 < middle_mm < self.length:
+            raise ValueError(f"the middle marker must lie between the ends, got {middle_mm} mm")
+        self.tempo = float(tempo)
+        # Position of each marker along the wand from its centre, in lengths.
+        self._along = np.array(
+            [-0.5, 0.5] + ([] if middle_mm is None else [-0.5 + middle_mm / length])
+        )
+        self.n_markers = self._along.size
+        self.labels = ("WAND_A", "WAND_B", "WAND_M")[: self.n_markers]
 
     def sample(self, times: F64, markers: I64) -> F64:
-        t = np.asarray(times, dtype=np.float64)[:, None]
+        t = self.tempo * np.asarray(times, dtype=np.float64)[:, None]
         w = 2 * np.pi * self._freq
         wave = 0.6 * np.sin(w[0] * t + self._phase[0]) + 0.4 * np.sin(w[1] * t + self._phase[1])
         c = self.centre + self.extent * wave
         yaw = self._yaw_rate * t[:, 0] + 0.5 * np.sin(0.31 * t[:, 0])
         pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t[:, 0] + self._tilt[1])
         d = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
-        sign = np.where(np.asarray(markers) == 0, -0.5, 0.5)[:, None]
-        return np.asarray(c + sign * self.length * d)
+        along = self._along[np.asarray(markers, dtype=np.int64)][:, None]
+        return np.asarray(c + along * self.length * d)
 
 
 def _rotations(axis: F64, angle: F64) -> F64:

@@ -14,7 +14,12 @@ from spotlab.console.paths import check_output_dir, check_output_paths
 from spotlab.io import FileFormatError
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
-from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
+from spotlab.simulators.centroid_service import (
+    CENTROID_MOTIONS,
+    LFRAME_MARKERS,
+    CentroidSimOptions,
+    serve_centroid_pty,
+)
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import lab_dir
 from spotlab.simulators.motions import MOTIONS, from_c3d
@@ -94,8 +99,9 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="selspot: wand (default), cluster, gait, lframe (static L-frame), or a C3D file "
         "whose markers move the LEDs; centroid: walk (default, the 40-marker body), static "
-        "(the body standing still, swaying a few mm) or rom (range of motion: every joint "
-        "moves while the subject turns on the spot)",
+        "(the body standing still, swaying a few mm), rom (range of motion: every joint "
+        "moves while the subject turns on the spot), wand (a passive wand of --markers 2 or "
+        "3 waved through the volume) or lframe (a static L-frame on the floor)",
     )
     p.add_argument(
         "--reflectance",
@@ -145,7 +151,21 @@ def add_parser(sub: Any) -> None:
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
     cen = p.add_argument_group("centroid (video cameras, passive markers)")
-    cen.add_argument("--markers", type=int, default=40, help="markers on the walking body (40)")
+    cen.add_argument(
+        "--markers", type=int, default=None,
+        help="markers: on the walking body (default 40), on the wand (2 or 3, default 3), "
+        "of the L-frame (default 4)",
+    )  # fmt: skip
+    cen.add_argument(
+        "--wand-length", type=float, default=500.0, metavar="MM",
+        help="wand: distance between its end markers (default 500 mm); a 3-marker wand's "
+        "middle marker sits 0.4 of it from end A",
+    )  # fmt: skip
+    cen.add_argument(
+        "--frame-points-out", type=Path, metavar="P.csv",
+        help="write the L-frame's published marker coordinates (X,Y,Z mm per marker) for "
+        "spotlab calibrate --frame-points",
+    )  # fmt: skip
     cen.add_argument(
         "--ghosts", type=float, default=0.02, metavar="RATE",
         help="fraction of (camera, marker) pairs that see a floor-reflection ghost (0.02)",
@@ -272,14 +292,23 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     cameras = 8 if args.cameras is None else args.cameras
     sun = _episodes(args.sunlight, "--sunlight", cameras, default_camera=True)
     off = _episodes(args.camera_off, "--camera-off", cameras, default_camera=False)
+    motion = args.motion or "walk"
+    if motion not in CENTROID_MOTIONS:
+        raise CommandError(
+            f"--motion {motion!r}: the centroid simulator plays {', '.join(CENTROID_MOTIONS)}"
+        )
+    markers = args.markers
+    if markers is None:
+        markers = {"wand": 3, "lframe": LFRAME_MARKERS}.get(motion, 40)
     options = CentroidSimOptions(
-        cameras=cameras, markers=args.markers,
+        cameras=cameras, markers=markers, motion=motion,
+        wand_length_mm=args.wand_length, frame_points_out=args.frame_points_out,
         rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
         rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
         ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=sun,
         camera_off=off, occlusion=0 if args.no_occlusion else 1,
-        lab_name=args.lab_name or "centroid", lab=args.lab, motion=args.motion or "walk",
+        lab_name=args.lab_name or "centroid", lab=args.lab,
     )  # fmt: skip
     try:
         options.validate()
@@ -297,6 +326,7 @@ def check_args(args: argparse.Namespace) -> None:
             ("--fault-log", args.fault_log),
             ("--rig-out", args.rig_out),
             ("--model-out", getattr(args, "model_out", None)),
+            ("--frame-points-out", getattr(args, "frame_points_out", None)),
         ]
     )
     check_output_dir("--lab" if args.lab is not None else "lab folder", lab_dir(args.lab))
@@ -318,6 +348,10 @@ def run(args: argparse.Namespace) -> int:
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
         options = centroid_options_from_args(args)
+        if args.model_out is not None and options.motion != "walk":
+            raise CommandError(
+                "--model-out: the marker model is the walking body's (--motion walk)"
+            )
         if args.model_out is not None:
             write_body_model(args.model_out, options.markers, options.seed)
         return _serve(args, serve_centroid_pty(options))
