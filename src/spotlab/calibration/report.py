@@ -9,6 +9,7 @@ covered; and a plain verdict with its reasons.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,13 @@ from numpy.typing import NDArray
 from spotlab.calibration._rays import intersect
 from spotlab.geometry import Rig
 
-__all__ = ["VERDICT_LIMITS", "quality_report", "write_report_figure"]
+__all__ = [
+    "VERDICT_LIMITS",
+    "image_coverage",
+    "lens_report",
+    "quality_report",
+    "write_report_figure",
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -30,7 +37,7 @@ VERDICT_LIMITS = {"good": (0.5, 0.002, 0.4), "acceptable": (1.5, 0.01, 0.2)}
 _GRID = (16, 12)
 
 
-def _coverage(uv: FloatArray, size: tuple[int, int]) -> float:
+def image_coverage(uv: FloatArray, size: tuple[int, int]) -> float:
     """Fraction of a 16 x 12 grid of image cells holding at least one observation."""
     uv = uv[np.all(np.isfinite(uv), axis=-1)]
     if uv.size == 0:
@@ -101,7 +108,7 @@ def quality_report(
                 "frame_rms_px": _rms(frame_residuals[c]),
                 "observations": int(np.count_nonzero(inliers[:, c])),
                 "rejected": int(np.count_nonzero(seen[:, c] & ~inliers[:, c])),
-                "image_coverage": _coverage(wand[:, c].reshape(-1, 2), cam.size),
+                "image_coverage": image_coverage(wand[:, c].reshape(-1, 2), cam.size),
             }
         )
     lengths = wand_lengths(rig, wand, inliers)
@@ -158,7 +165,8 @@ def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any]) -> dict[str, A
             if not cam["image_coverage"] >= cover_min:
                 failed.append(
                     f"{cam['name']}: the wand covered {100 * cam['image_coverage']:.0f} % of "
-                    f"the image (< {100 * cover_min:.0f} %); distortion is poorly determined"
+                    f"the image (< {100 * cover_min:.0f} %): wave it nearer the image's "
+                    "edges and corners"
                 )
         if not wand["sd_mm"] <= sd_frac * wand["nominal_mm"]:
             failed.append(
@@ -170,6 +178,58 @@ def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any]) -> dict[str, A
         reasons = failed
         grade = "acceptable" if level == "good" else "poor"
     return {"grade": grade, "reasons": reasons}
+
+
+def lens_report(report: dict[str, Any], mode: str, choices: Sequence[Any]) -> None:
+    """Add to ``report["cameras"][c]["distortion"]`` the lens terms fitted, why, what next.
+
+    Parameters
+    ----------
+    report : dict
+        A :func:`quality_report`, changed in place.
+    mode : str
+        ``"auto"``, ``"none"``, ``"radial"``, ``"full"`` or ``"terms"`` (a given list).
+    choices : sequence of LensChoice
+        Per camera (``calibration._lens_terms``): ``terms``, ``edge_sd`` (units of the
+        image noise), ``reason``, ``limited_by``.
+
+    Notes
+    -----
+    Each camera gets ``fitted`` (list of term names), ``mode``, ``edge_sd_noise`` and
+    ``edge_sd_px`` (largest SD of the modelled distortion over the image, in noise
+    units and in px at the camera's reprojection RMS), ``limited_by``, ``reason`` and
+    ``advice``; ``report["distortion_mode"]`` is ``mode``.
+    """
+    report["distortion_mode"] = mode
+    for cam, ch in zip(report["cameras"], choices, strict=True):
+        sd = float(ch.edge_sd)
+        advice = ""
+        if ch.limited_by == "coverage":
+            advice = (
+                "wave the wand nearer this camera's image edges and corners to fit more "
+                "terms, or force them with --distortion radial|full"
+            )
+        elif ch.limited_by == "conditioning":
+            advice = (
+                "record a longer wand dance that reaches this camera's image edges, or "
+                "force the terms with --distortion radial|full"
+            )
+        elif ch.limited_by == "inversion":
+            advice = "cover more of the image so that the lens model holds to its edges"
+        elif ch.limited_by == "chosen" and not sd <= 1.0:
+            advice = (
+                f"the terms asked for are poorly determined here (distortion at the image "
+                f"edge uncertain by {sd:.3g} x the noise): use --distortion auto"
+            )
+        cam["distortion"] = {
+            "fitted": list(ch.terms),
+            "mode": mode,
+            "edge_sd_noise": sd if np.isfinite(sd) else None,
+            "edge_sd_px": sd * cam["reprojection_rms_px"] if np.isfinite(sd) else None,
+            "limited_by": ch.limited_by,
+            "reason": ch.reason or "every term fitted",
+            "advice": advice,
+        }
 
 
 def write_report_figure(

@@ -47,7 +47,20 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--frame-points", type=Path, help="CSV with X, Y, Z (mm) per frame marker")
     p.add_argument("--report", type=Path, help="quality report (JSON); default OUT.report.json")
     p.add_argument("--figure", type=Path, help="quality figure (PNG); default OUT.report.png")
-    p.add_argument("--no-distortion", action="store_true", help="fit no lens distortion")
+    p.add_argument(
+        "--distortion",
+        choices=("auto", "none", "radial", "full"),
+        default="auto",
+        help="lens terms to fit: auto (default; per camera what the wand's coverage of the "
+        "image determines), none, radial (k1, k2) or full (k1, k2, p1, p2, k3)",
+    )
+    p.add_argument(
+        "--no-distortion",
+        dest="distortion",
+        action="store_const",
+        const="none",
+        help="fit no lens distortion (same as --distortion none)",
+    )
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.set_defaults(run=run)
 
@@ -92,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         obs.frame_points,
         obs.image_size,
         names=obs.names,
-        distortion=() if args.no_distortion else ("k1", "k2", "p1", "p2", "k3"),
+        distortion=args.distortion,
         progress=progress,
     )
     out: Path = args.out
