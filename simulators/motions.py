@@ -154,38 +154,46 @@ class Delayed(Motion):
 
 
 class WandDance(Motion):
-    """Two LEDs ``length`` mm apart on a wand waved through the volume.
+    """Two LEDs ``length`` mm apart on a wand waved through the volume as an operator does.
 
-    The wand centre follows a sum of slow sines inside ``centre +- extent``;
-    the wand turns about the vertical and tilts up and down, so that it covers
-    many directions. Marker 0 and 1 are the wand ends.
+    The operator walks slowly through the capture volume (a Lissajous path of
+    ``walk`` mm amplitude, 0.05-0.09 Hz) while sweeping the wand with the arm, quickly
+    (``reach`` mm sideways at 0.35-0.55 Hz) and from near the floor to above the head
+    (``centre[2] +- extent_z``, 0.18-0.28 Hz), turning and tilting it so that it
+    points in many directions. In 20 s the wand sweeps most of the volume the cameras
+    look at. Marker 0 and 1 are the wand ends.
     """
 
     def __init__(
         self,
         length: float = 500.0,
         centre: tuple[float, float, float] = (0.0, 0.0, 1000.0),
-        extent: tuple[float, float, float] = (800.0, 800.0, 450.0),
+        walk: float = 1100.0,
+        reach: float = 500.0,
+        extent_z: float = 700.0,
         seed: int = 0,
     ) -> None:
         rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3A4D]))
         self.length = float(length)
         self.centre = np.asarray(centre, dtype=np.float64)
-        self.extent = np.asarray(extent, dtype=np.float64)
-        self._freq = rng.uniform(0.06, 0.25, size=(2, 3))  # Hz, two sines per axis
-        self._phase = rng.uniform(0, 2 * np.pi, size=(2, 3))
+        self._amp = np.array([walk, walk, reach, reach, extent_z])
+        self._freq = np.concatenate(
+            [rng.uniform(0.05, 0.09, 2), rng.uniform(0.35, 0.55, 2), rng.uniform(0.18, 0.28, 1)]
+        )  # Hz: walk x, y; arm x, y; arm up and down
+        self._phase = rng.uniform(0, 2 * np.pi, size=5)
         self._yaw_rate = rng.uniform(0.5, 0.9) * rng.choice([-1.0, 1.0])  # rad/s
         self._tilt = (rng.uniform(0.2, 0.4), rng.uniform(0, 2 * np.pi))  # Hz, phase
         self.n_markers = 2
         self.labels = ("WAND_A", "WAND_B")
 
     def sample(self, times: F64, markers: I64) -> F64:
-        t = np.asarray(times, dtype=np.float64)[:, None]
-        w = 2 * np.pi * self._freq
-        wave = 0.6 * np.sin(w[0] * t + self._phase[0]) + 0.4 * np.sin(w[1] * t + self._phase[1])
-        c = self.centre + self.extent * wave
-        yaw = self._yaw_rate * t[:, 0] + 0.5 * np.sin(0.31 * t[:, 0])
-        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t[:, 0] + self._tilt[1])
+        t = np.asarray(times, dtype=np.float64)
+        wave = self._amp * np.sin(2 * np.pi * self._freq * t[:, None] + self._phase)
+        c = self.centre + np.stack(
+            [wave[:, 0] + wave[:, 2], wave[:, 1] + wave[:, 3], wave[:, 4]], axis=1
+        )
+        yaw = self._yaw_rate * t + 0.5 * np.sin(0.31 * t)
+        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t + self._tilt[1])
         d = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
         sign = np.where(np.asarray(markers) == 0, -0.5, 0.5)[:, None]
         return np.asarray(c + sign * self.length * d)

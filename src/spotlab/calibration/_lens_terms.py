@@ -77,7 +77,7 @@ PRESETS: dict[str, tuple[str, ...]] = {"none": (), "radial": ("k1", "k2"), "full
 #: Smallest fraction of the image the wand must cover before a term is fitted.
 MIN_COVERAGE = {"k1": 0.03, "k2": 0.1, "p1": 0.15, "p2": 0.15, "k3": 0.3}
 #: Smallest estimate, in standard errors, of a term that is fitted.
-MIN_T = 3.0
+MIN_T = 2.0
 
 
 @dataclass(frozen=True)
@@ -231,8 +231,7 @@ def choose_terms(
 
     Each candidate is adjusted for every camera whose coverage allows it, together with
     the terms kept so far; a camera whose estimate of the candidate is below
-    :data:`MIN_T` standard errors (the weakest first) loses it and the rest are
-    adjusted again.
+    :data:`MIN_T` standard errors loses it and the rest are adjusted again.
 
     Parameters
     ----------
@@ -263,7 +262,7 @@ def choose_terms(
         problem.free = base.copy()
         for c, t in enumerate(terms):
             problem.free[c, term_columns(t)] = True
-        return adjust(problem, start, max_iterations=40)[0]
+        return adjust(problem, start, max_iterations=15, tolerance=1e-6)[0]
 
     for new, needs in CANDIDATES:
         eligible = []
@@ -292,13 +291,13 @@ def choose_terms(
             if not weak:
                 kept, state = trial, fitted
                 break
-            c, z_new = min(weak, key=lambda item: item[1])
-            eligible.remove(c)
-            left_out[c].append(
-                f"{', '.join(new)} (estimate {z_new:.2g} standard errors from zero, "
-                f"needs >= {MIN_T:g})"
-            )
-            limit[c] = limit[c] or "conditioning"
+            for c, z_new in weak:
+                eligible.remove(c)
+                left_out[c].append(
+                    f"{', '.join(new)} (estimate {z_new:.2g} standard errors from zero, "
+                    f"needs >= {MIN_T:g})"
+                )
+                limit[c] = limit[c] or "conditioning"
     S, _ = reduced_camera_system(problem, state)
     sds = edge_sd(S, base, state.blocks, sizes, kept)
     problem.free = base.copy()
