@@ -77,7 +77,7 @@ PRESETS: dict[str, tuple[str, ...]] = {"none": (), "radial": ("k1", "k2"), "full
 #: Smallest fraction of the image the wand must cover before a term is fitted.
 MIN_COVERAGE = {"k1": 0.03, "k2": 0.1, "p1": 0.15, "p2": 0.15, "k3": 0.3}
 #: Smallest estimate, in standard errors, of a term that is fitted.
-MIN_T = 2.0
+MIN_T = 3.0
 
 
 @dataclass(frozen=True)

@@ -293,6 +293,7 @@ def wand_calibrate(
     distortion: str | Sequence[str] = "auto",
     principal_point: bool = True,
     outlier_sigma: float = 5.0,
+    units: str = "px",
     progress: Progress | None = None,
 ) -> WandCalibration:
     """Calibrate a rig from a wand dance and a static reference object, no guess needed.
@@ -327,6 +328,8 @@ def wand_calibrate(
     outlier_sigma : float
         Observations whose residual exceeds this many robust standard deviations are
         rejected before the final adjustment.
+    units : str
+        Name of the image unit, for the report (``"px"``; ``"counts"`` for a PSD).
     progress : callable, optional
         Called with a short message at each stage.
 
@@ -440,7 +443,7 @@ def wand_calibrate(
     inliers[frames] = problem.use
     ends = np.full((F, 2, 3), np.nan)
     ends[frames] = state.wand_ends(length)
-    report = quality_report(rig, wand, length, wand_res, r_frame, inliers)
+    report = quality_report(rig, wand, length, wand_res, r_frame, inliers, units)
     lens_report(report, mode, choices)
     report["stages"] = stages
     report["timings"] = timings

@@ -22,6 +22,7 @@ from spotlab.console.calibration_inputs import (
     load_recordings,
 )
 from spotlab.console.errors import CommandError
+from spotlab.console.output_paths import check_output_paths
 
 
 def add_parser(sub: Any) -> None:
@@ -88,6 +89,10 @@ def _load(args: argparse.Namespace) -> WandObservations:
 
 
 def run(args: argparse.Namespace) -> int:
+    out: Path = args.out
+    report_path: Path = args.report or out.with_suffix(".report.json")
+    figure_path: Path = args.figure or out.with_suffix(".report.png")
+    check_output_paths([("--out", out), ("--report", report_path), ("--figure", figure_path)])
     obs = _load(args)
     length = args.wand_length if args.wand_length is not None else obs.wand_length
     if length is None:
@@ -106,26 +111,39 @@ def run(args: argparse.Namespace) -> int:
         obs.image_size,
         names=obs.names,
         distortion=args.distortion,
+        units=obs.units,
         progress=progress,
     )
-    out: Path = args.out
-    report_path = args.report or out.with_suffix(".report.json")
-    figure_path = args.figure or out.with_suffix(".report.png")
-    result.rig.save(out)
-    report_path.write_text(json.dumps(result.report, indent=2) + "\n")
+    # The figure first: it is the output most likely to fail (matplotlib), and a rig
+    # is written only with its report.
     write_report_figure(
-        result.rig, obs.wand, result.wand_residuals, result.inliers, result.report, figure_path
+        result.rig,
+        obs.wand,
+        result.wand_residuals,
+        result.inliers,
+        result.report,
+        figure_path,
+        frame_points=obs.frame_points,
     )
+    report_path.write_text(json.dumps(result.report, indent=2) + "\n")
+    result.rig.save(out)
     if args.json:
         print(json.dumps({**result.report, "calibration": str(out)}))
         return 0
     rep = result.report
+    units = rep["image_units"]
     for cam in rep["cameras"]:
+        lens = cam["distortion"]
         print(
-            f"  {cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3f} px, "
+            f"  {cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3f} {units}, "
             f"{cam['observations']} points ({cam['rejected']} rejected), "
-            f"image covered {100 * cam['image_coverage']:.0f} %"
+            f"image covered {100 * cam['image_coverage']:.0f} %, "
+            f"lens terms {', '.join(lens['fitted']) or 'none'} ({lens['mode']})"
         )
+        if lens["limited_by"] not in ("", "chosen"):
+            print(f"      {lens['reason']}")
+        if lens["advice"]:
+            print(f"      to do: {lens['advice']}")
     w = rep["wand"]
     print(
         f"  wand: {w['frames']} frames, length {w['mean_mm']:.3f} mm (nominal "
