@@ -448,3 +448,30 @@ def make_motion(name: str | Path, n_markers: int, seed: int = 0) -> Motion:
     if base.n_markers >= n_markers:
         return base if base.n_markers == n_markers else Subset(base, n_markers)
     return Concat([base, reference_markers(n_markers - base.n_markers, seed)])
+
+
+def static_points(motion: Motion) -> list[tuple[int, str, F64]]:
+    """The static markers of a motion with their known coordinates.
+
+    Parameters
+    ----------
+    motion : Motion
+        As :func:`make_motion` builds it.
+
+    Returns
+    -------
+    list of (int, str, ndarray)
+        Marker index (0-based, the LED id), label and position (3,) in mm, for every
+        marker that stands still (the L-frame and the other reference markers), in
+        marker order. Empty when the motion has none.
+    """
+    if isinstance(motion, StaticMarkers):
+        return [(i, motion.labels[i], motion.points[i]) for i in range(motion.n_markers)]
+    if isinstance(motion, Concat):
+        out = []
+        for start, part in zip(motion._starts, motion.parts, strict=False):
+            out += [(int(start) + i, lab, p) for i, lab, p in static_points(part)]
+        return out
+    if isinstance(motion, Subset):
+        return [item for item in static_points(motion.motion) if item[0] < motion.n_markers]
+    return []

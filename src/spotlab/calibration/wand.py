@@ -22,6 +22,7 @@ from spotlab.calibration._camera_block import BLOCK, cameras_from_blocks
 from spotlab.calibration._lens_terms import (
     ALL_TERMS,
     LADDER,
+    MIN_COVERAGE,
     PRESETS,
     LensChoice,
     choose_terms,
@@ -237,15 +238,36 @@ def _fixed_lens(
     return [LensChoice(terms, sd, reason, "chosen") for sd in sds], state
 
 
-def _drop_step(choice: LensChoice, problems: list[str]) -> LensChoice:
-    """The ladder step below ``choice``: its model did not invert over the image."""
-    below = max((s for s in LADDER if len(s) < len(choice.terms)), key=len)
-    dropped = [t for t in choice.terms if t not in below]
+def _next_step(
+    choice: LensChoice, problems: list[str], tried: set[tuple[str, ...]], cover: float
+) -> LensChoice | None:
+    """Another :data:`LADDER` step for a camera whose fitted model does not invert.
+
+    First the next richer step the coverage allows (a strong barrel lens fitted with
+    ``k1`` alone turns back before the image corners; ``k2`` may hold it), then the
+    richest poorer step; None when every step has been tried.
+    """
+    index = LADDER.index(choice.terms) if choice.terms in LADDER else len(LADDER) - 1
+    richer = [
+        s
+        for s in LADDER[index + 1 : index + 2]
+        if s not in tried and all(cover >= MIN_COVERAGE[t] for t in s)
+    ]
+    poorer = [s for s in LADDER[:index][::-1] if s not in tried]
+    options = richer + poorer
+    if not options:
+        return None
+    step = options[0]
+    change = (
+        f"{', '.join(t for t in step if t not in choice.terms)} fitted"
+        if len(step) > len(choice.terms)
+        else f"{', '.join(t for t in choice.terms if t not in step)} not fitted"
+    )
     return LensChoice(
-        below,
+        step,
         choice.edge_sd,
-        f"{', '.join(dropped)} not fitted: with them the lens model could not be inverted "
-        f"over the whole image ({problems[0]})",
+        f"{change}: with {', '.join(choice.terms)} the lens model could not be inverted over "
+        f"the whole image ({problems[0]})",
         "inversion",
     )
 
@@ -405,6 +427,7 @@ def wand_calibrate(
     fitted = [f"{n} {', '.join(t) or 'none'}" for n, t in zip(names, terms, strict=True)]
     say("lens terms: " + "; ".join(fitted))
 
+    tried: list[set[tuple[str, ...]]] = [set() for _ in range(C)]
     while True:
         free = _free_mask(C, "full", terms, principal_point, gauge)
         final, problem, frames, more = _final_stages(
@@ -424,14 +447,21 @@ def wand_calibrate(
                 "fit fewer terms (distortion 'auto' or 'none') or cover more of the image"
             )
         for c, found in enumerate(problems):
-            if found:
-                choices[c] = _drop_step(choices[c], found)
-                terms[c] = choices[c].terms
-                keep = term_columns(terms[c])
-                state.blocks[c, 10:15] = [
-                    state.blocks[c, col] if col in keep else 0.0 for col in range(10, 15)
-                ]
-                say(f"{names[c]}: lens model does not invert over the image; fitting fewer terms")
+            if not found:
+                continue
+            tried[c].add(terms[c])
+            step = _next_step(choices[c], found, tried[c], coverage[c])
+            if step is None:
+                raise CalibrationError(
+                    f"{names[c]}: no lens model fitted from this wand dance can be inverted "
+                    f"over the whole image ({found[0]}); cover more of the image"
+                )
+            choices[c], terms[c] = step, step.terms
+            keep = term_columns(terms[c])
+            for col in range(10, 15):
+                if col not in keep:
+                    state.blocks[c, col] = 0.0
+            say(f"{names[c]}: lens model does not invert over the image; trying {step.reason}")
     timings["total_s"] = time.perf_counter() - t0
 
     cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)

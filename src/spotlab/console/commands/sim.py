@@ -10,10 +10,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
+from spotlab.console.output_paths import check_output_paths
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
-from spotlab.simulators.motions import MOTIONS
+from spotlab.simulators.motions import MOTIONS, make_motion, static_points
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -83,6 +84,14 @@ def add_parser(sub: Any) -> None:
         type=Path,
         metavar="RIG.toml",
         help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
+    )
+    p.add_argument(
+        "--frame-points-out",
+        type=Path,
+        metavar="POINTS.csv",
+        help="selspot: write the known coordinates (mm) of the motion's static markers (the "
+        "L-frame first) as CSV: marker (LED number, 1-based), label, X, Y, Z; the "
+        "--frame-points table of spotlab calibrate",
     )
     p.add_argument(
         "--ring-phase",
@@ -180,6 +189,22 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
     )
 
 
+def _write_frame_points(path: Path, options: service.SelspotSimOptions) -> None:
+    """The static markers' coordinates of the simulated motion, for ``spotlab calibrate``."""
+    check_output_paths([("--frame-points-out", path)])
+    try:
+        points = static_points(make_motion(options.motion, options.leds, options.seed))
+    except (OSError, ValueError) as exc:
+        raise CommandError(f"--motion {options.motion}: {exc}") from None
+    if not points:
+        raise CommandError(
+            f"--frame-points-out: --motion {options.motion} with --leds {options.leds} has no "
+            "static markers (use --motion lframe, or more LEDs than the motion moves)"
+        )
+    rows = [f"{i + 1},{label},{x:g},{y:g},{z:g}\n" for i, label, (x, y, z) in points]
+    path.write_text("marker,label,X,Y,Z\n" + "".join(rows))
+
+
 def clock_steps_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
     """``--clock-step AT:DELTA`` options as ``(at_s, delta_s)`` pairs."""
     steps = []
@@ -255,6 +280,8 @@ def run(args: argparse.Namespace) -> int:
     if args.input:
         raise CommandError("--input wires timer inputs; selspot systems have none")
     options = options_from_args(args)
+    if args.frame_points_out is not None:
+        _write_frame_points(args.frame_points_out, options)
     server = (
         service.serve_tcp(options, port=args.tcp)
         if args.tcp is not None
