@@ -231,7 +231,8 @@ def choose_terms(
 
     Each candidate is adjusted for every camera whose coverage allows it, together with
     the terms kept so far; a camera whose estimate of the candidate is below
-    :data:`MIN_T` standard errors loses it and the rest are adjusted again.
+    :data:`MIN_T` standard errors loses it (set back to zero; the final stages adjust
+    every camera again).
 
     Parameters
     ----------
@@ -279,7 +280,7 @@ def choose_terms(
                 limit[c] = limit[c] or "coverage"
             else:
                 eligible.append(c)
-        while eligible:
+        if eligible:
             trial = [
                 tuple(t for t in ALL_TERMS if t in kept[c] or (c in eligible and t in new))
                 for c in range(C)
@@ -288,16 +289,19 @@ def choose_terms(
             z = _significance(problem, fitted, base, trial)
             weak = [(c, max(float(z[c][trial[c].index(t)]) for t in new)) for c in eligible]
             weak = [(c, zc) for c, zc in weak if not zc >= MIN_T]
-            if not weak:
-                kept, state = trial, fitted
-                break
+            # Weak estimates are set back to zero; the cameras keep the rest of the fit
+            # (later stages adjust everything again).
             for c, z_new in weak:
                 eligible.remove(c)
+                fitted.blocks[c, term_columns(new)] = 0.0
                 left_out[c].append(
                     f"{', '.join(new)} (estimate {z_new:.2g} standard errors from zero, "
                     f"needs >= {MIN_T:g})"
                 )
                 limit[c] = limit[c] or "conditioning"
+            for c in eligible:
+                kept[c] = trial[c]
+            state = fitted
     S, _ = reduced_camera_system(problem, state)
     sds = edge_sd(S, base, state.blocks, sizes, kept)
     problem.free = base.copy()
