@@ -39,6 +39,7 @@ from spotlab.calibration._wand_bundle import (
     residuals,
     robust_sigma,
 )
+from spotlab.core.errors import CalibrationError
 from spotlab.geometry.lens_check import image_grid
 
 __all__ = [
@@ -49,6 +50,9 @@ __all__ = [
     "LensChoice",
     "choose_terms",
     "edge_sd",
+    "fit_fixed_terms",
+    "lens_mode",
+    "next_step",
     "term_columns",
 ]
 
@@ -231,8 +235,8 @@ def choose_terms(
 
     Each candidate is adjusted for every camera whose coverage allows it, together with
     the terms kept so far; a camera whose estimate of the candidate is below
-    :data:`MIN_T` standard errors loses it (set back to zero; the final stages adjust
-    every camera again).
+    :data:`MIN_T` standard errors loses it (set back to zero) and the rest are adjusted
+    once more without it.
 
     Parameters
     ----------
@@ -301,7 +305,9 @@ def choose_terms(
                 limit[c] = limit[c] or "conditioning"
             for c in eligible:
                 kept[c] = trial[c]
-            state = fitted
+            # Terms fitted together leave the others where they fit jointly: fit again
+            # without the weak ones (once; the final stages adjust everything again).
+            state = fit(kept, fitted) if weak else fitted
     S, _ = reduced_camera_system(problem, state)
     sds = edge_sd(S, base, state.blocks, sizes, kept)
     problem.free = base.copy()
@@ -316,3 +322,72 @@ def choose_terms(
         )
         for c in range(C)
     ], state
+
+
+def lens_mode(distortion: str | Sequence[str]) -> tuple[str, tuple[str, ...]]:
+    """``("auto", ())`` or the name of a fixed set (preset or ``"terms"``) and its terms."""
+    if isinstance(distortion, str):
+        if distortion == "auto":
+            return "auto", ()
+        if distortion in PRESETS:
+            return distortion, PRESETS[distortion]
+        raise CalibrationError(
+            f"distortion {distortion!r}: expected auto, {', '.join(PRESETS)} or a list of terms"
+        )
+    unknown = set(distortion) - set(ALL_TERMS)
+    if unknown:
+        raise CalibrationError(f"unknown distortion term(s) {sorted(unknown)}")
+    return "terms", tuple(t for t in ALL_TERMS if t in distortion)
+
+
+def fit_fixed_terms(
+    mode: str,
+    terms: tuple[str, ...],
+    problem: BundleProblem,
+    state: BundleState,
+    base: BoolArray,
+    sizes: list[tuple[int, int]],
+) -> tuple[list[LensChoice], BundleState]:
+    """The terms asked for, adjusted for every camera, with their edge SD."""
+    C = len(sizes)
+    problem.free = base.copy()
+    problem.free[:, term_columns(terms)] = True
+    state = adjust(problem, state, max_iterations=40)[0]
+    S, _ = reduced_camera_system(problem, state)
+    sds = edge_sd(S, base, state.blocks, sizes, [terms] * C)
+    reason = f"{', '.join(terms) or 'no terms'} as asked ({mode})"
+    return [LensChoice(terms, sd, reason, "chosen") for sd in sds], state
+
+
+def next_step(
+    choice: LensChoice, problems: list[str], tried: set[tuple[str, ...]], cover: float
+) -> LensChoice | None:
+    """Another :data:`LADDER` step for a camera whose fitted model does not invert.
+
+    First the next richer step the coverage allows (a strong barrel lens fitted with
+    ``k1`` alone turns back before the image corners; ``k2`` may hold it), then the
+    richest poorer step; None when every step has been tried.
+    """
+    index = LADDER.index(choice.terms) if choice.terms in LADDER else len(LADDER) - 1
+    richer = [
+        s
+        for s in LADDER[index + 1 : index + 2]
+        if s not in tried and all(cover >= MIN_COVERAGE[t] for t in s)
+    ]
+    poorer = [s for s in LADDER[:index][::-1] if s not in tried]
+    options = richer + poorer
+    if not options:
+        return None
+    step = options[0]
+    change = (
+        f"{', '.join(t for t in step if t not in choice.terms)} fitted"
+        if len(step) > len(choice.terms)
+        else f"{', '.join(t for t in choice.terms if t not in step)} not fitted"
+    )
+    return LensChoice(
+        step,
+        choice.edge_sd,
+        f"{change}: with {', '.join(choice.terms)} the lens model could not be inverted over "
+        f"the whole image ({problems[0]})",
+        "inversion",
+    )

@@ -20,13 +20,10 @@ from numpy.typing import NDArray
 
 from spotlab.calibration._camera_block import BLOCK, cameras_from_blocks
 from spotlab.calibration._lens_terms import (
-    ALL_TERMS,
-    LADDER,
-    MIN_COVERAGE,
-    PRESETS,
-    LensChoice,
     choose_terms,
-    edge_sd,
+    fit_fixed_terms,
+    lens_mode,
+    next_step,
     term_columns,
 )
 from spotlab.calibration._rays import intersect
@@ -34,7 +31,6 @@ from spotlab.calibration._wand_bundle import (
     BundleProblem,
     BundleState,
     adjust,
-    reduced_camera_system,
     residuals,
     robust_cost,
     robust_sigma,
@@ -203,75 +199,6 @@ def _free_mask(
     return free
 
 
-def _lens_mode(distortion: str | Sequence[str]) -> tuple[str, tuple[str, ...]]:
-    """``("auto", ())`` or the name of a fixed set (preset or ``"terms"``) and its terms."""
-    if isinstance(distortion, str):
-        if distortion == "auto":
-            return "auto", ()
-        if distortion in PRESETS:
-            return distortion, PRESETS[distortion]
-        raise CalibrationError(
-            f"distortion {distortion!r}: expected auto, {', '.join(PRESETS)} or a list of terms"
-        )
-    unknown = set(distortion) - set(ALL_TERMS)
-    if unknown:
-        raise CalibrationError(f"unknown distortion term(s) {sorted(unknown)}")
-    return "terms", tuple(t for t in ALL_TERMS if t in distortion)
-
-
-def _fixed_lens(
-    mode: str,
-    terms: tuple[str, ...],
-    problem: BundleProblem,
-    state: BundleState,
-    base: BoolArray,
-    sizes: list[tuple[int, int]],
-) -> tuple[list[LensChoice], BundleState]:
-    """The terms asked for, adjusted for every camera, with their edge SD."""
-    C = len(sizes)
-    problem.free = base.copy()
-    problem.free[:, term_columns(terms)] = True
-    state = adjust(problem, state, max_iterations=40)[0]
-    S, _ = reduced_camera_system(problem, state)
-    sds = edge_sd(S, base, state.blocks, sizes, [terms] * C)
-    reason = f"{', '.join(terms) or 'no terms'} as asked ({mode})"
-    return [LensChoice(terms, sd, reason, "chosen") for sd in sds], state
-
-
-def _next_step(
-    choice: LensChoice, problems: list[str], tried: set[tuple[str, ...]], cover: float
-) -> LensChoice | None:
-    """Another :data:`LADDER` step for a camera whose fitted model does not invert.
-
-    First the next richer step the coverage allows (a strong barrel lens fitted with
-    ``k1`` alone turns back before the image corners; ``k2`` may hold it), then the
-    richest poorer step; None when every step has been tried.
-    """
-    index = LADDER.index(choice.terms) if choice.terms in LADDER else len(LADDER) - 1
-    richer = [
-        s
-        for s in LADDER[index + 1 : index + 2]
-        if s not in tried and all(cover >= MIN_COVERAGE[t] for t in s)
-    ]
-    poorer = [s for s in LADDER[:index][::-1] if s not in tried]
-    options = richer + poorer
-    if not options:
-        return None
-    step = options[0]
-    change = (
-        f"{', '.join(t for t in step if t not in choice.terms)} fitted"
-        if len(step) > len(choice.terms)
-        else f"{', '.join(t for t in choice.terms if t not in step)} not fitted"
-    )
-    return LensChoice(
-        step,
-        choice.edge_sd,
-        f"{change}: with {', '.join(choice.terms)} the lens model could not be inverted over "
-        f"the whole image ({problems[0]})",
-        "inversion",
-    )
-
-
 def _final_stages(
     wand: FloatArray,
     length: float,
@@ -283,7 +210,7 @@ def _final_stages(
     names: list[str],
     outlier_sigma: float,
     say: Progress,
-) -> tuple[BundleState, BundleProblem, FloatArray, list[dict[str, Any]]]:
+) -> tuple[BundleState, BundleProblem, NDArray[np.intp], list[dict[str, Any]]]:
     """Re-triangulate every frame with the current rig, adjust, reject outliers, adjust."""
     cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
     centres, directions, ok = _retriangulate(cameras, wand)
@@ -377,7 +304,7 @@ def wand_calibrate(
     names = list(names) if names is not None else [f"cam{c + 1}" for c in range(C)]
     if len(names) != C:
         raise CalibrationError(f"{len(names)} names given for {C} cameras")
-    mode, fixed_terms = _lens_mode(distortion)
+    mode, fixed_terms = lens_mode(distortion)
 
     say("cold start: principal distances, relative orientations, world frame")
     init = cold_start(wand, length, frame, frame_points, sizes)
@@ -414,7 +341,7 @@ def wand_calibrate(
     if mode == "auto":
         choices, state = choose_terms(problem, state, base, sizes, coverage)
     else:
-        choices, state = _fixed_lens(mode, fixed_terms, problem, state, base, sizes)
+        choices, state = fit_fixed_terms(mode, fixed_terms, problem, state, base, sizes)
     terms = [ch.terms for ch in choices]
     stages.append(
         {
@@ -424,21 +351,27 @@ def wand_calibrate(
             "final_cost": robust_cost(problem, state),
         }
     )
+    coarse_problem = problem
     fitted = [f"{n} {', '.join(t) or 'none'}" for n, t in zip(names, terms, strict=True)]
     say("lens terms: " + "; ".join(fitted))
 
     tried: list[set[tuple[str, ...]]] = [set() for _ in range(C)]
     while True:
-        free = _free_mask(C, "full", terms, principal_point, gauge)
-        final, problem, frames, more = _final_stages(
-            wand, length, frame, frame_points, state, free, sizes, names, outlier_sigma, say
-        )
-        stages += more
-        cameras = cameras_from_blocks(final.blocks, final.rotations, sizes, names)
+        # The stage-2 lens must invert before every wand point is triangulated through
+        # it; the final one before it is returned.
+        cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
         problems = [lens_problems(cam) for cam in cameras]
         if not any(problems):
-            state = final
-            break
+            free = _free_mask(C, "full", terms, principal_point, gauge)
+            final, problem, frames, more = _final_stages(
+                wand, length, frame, frame_points, state, free, sizes, names, outlier_sigma, say
+            )
+            stages += more
+            cameras = cameras_from_blocks(final.blocks, final.rotations, sizes, names)
+            problems = [lens_problems(cam) for cam in cameras]
+            if not any(problems):
+                state = final
+                break
         if mode != "auto":
             c = next(i for i, p in enumerate(problems) if p)
             raise CalibrationError(
@@ -450,7 +383,7 @@ def wand_calibrate(
             if not found:
                 continue
             tried[c].add(terms[c])
-            step = _next_step(choices[c], found, tried[c], coverage[c])
+            step = next_step(choices[c], found, tried[c], coverage[c])
             if step is None:
                 raise CalibrationError(
                     f"{names[c]}: no lens model fitted from this wand dance can be inverted "
@@ -462,6 +395,10 @@ def wand_calibrate(
                 if col not in keep:
                     state.blocks[c, col] = 0.0
             say(f"{names[c]}: lens model does not invert over the image; trying {step.reason}")
+        # Adjust the new terms on the stage-2 frames (projection only: no inversion
+        # needed) before the wand is triangulated through them again.
+        coarse_problem.free = _free_mask(C, "full", terms, principal_point, gauge)
+        state, _ = adjust(coarse_problem, state, max_iterations=40)
     timings["total_s"] = time.perf_counter() - t0
 
     cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)

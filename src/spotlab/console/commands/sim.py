@@ -90,7 +90,7 @@ def add_parser(sub: Any) -> None:
         type=Path,
         metavar="POINTS.csv",
         help="selspot: write the known coordinates (mm) of the motion's static markers (the "
-        "L-frame first) as CSV: marker (LED number, 1-based), label, X, Y, Z; the "
+        "L-frame first) as CSV: marker (LED number, 1-based), X, Y, Z; the "
         "--frame-points table of spotlab calibrate",
     )
     p.add_argument(
@@ -201,8 +201,8 @@ def _write_frame_points(path: Path, options: service.SelspotSimOptions) -> None:
             f"--frame-points-out: --motion {options.motion} with --leds {options.leds} has no "
             "static markers (use --motion lframe, or more LEDs than the motion moves)"
         )
-    rows = [f"{i + 1},{label},{x:g},{y:g},{z:g}\n" for i, label, (x, y, z) in points]
-    path.write_text("marker,label,X,Y,Z\n" + "".join(rows))
+    rows = [f"{i + 1},{x:g},{y:g},{z:g}\n" for i, _label, (x, y, z) in points]
+    path.write_text("marker,X,Y,Z\n" + "".join(rows))
 
 
 def clock_steps_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
