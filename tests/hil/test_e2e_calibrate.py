@@ -31,6 +31,9 @@ WAND_SECONDS, FRAME_SECONDS, TRIAL_SECONDS = 20.0, 1.0, 5.0
 WAND_LENGTH_MM = 500.0
 GAIT_LEDS = 19
 
+# A 20 s dance through ptys, then calibrations of 2000 frames on a shared machine.
+pytestmark = pytest.mark.timeout(300)
+
 
 @dataclass
 class Recordings:
