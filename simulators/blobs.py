@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from spotlab.geometry import Camera
 
@@ -145,18 +147,35 @@ def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B
     return np.asarray(((dist < radius) & in_front & ~on[None]).any(axis=2))
 
 
-def _project(cam: Camera, X: F64, model: BlobModel) -> tuple[F64, F64, F64, B]:
-    """Image centroids (N, 2), diameters (px), raw peaks and whether each is in view."""
-    with np.errstate(invalid="ignore"):
-        z = X @ cam.R[2] + cam.t[2]
-    good = np.isfinite(z) & (z > 100.0)
-    zz = np.where(good, z, 1.0)
-    uv = cam.project(np.where(good[:, None], X, np.nan))
-    w, h = cam.size
-    diameter = np.where(good, float(cam.K[0, 0]) * model.marker_diameter_mm / zz, 0.0)
+def _project_many(cams: list[Camera], P: F64, model: BlobModel) -> tuple[F64, F64, F64, B]:
+    """Image centroids (n, N, 2), diameters (px), raw peaks and in-view flags (n, N).
+
+    ``P`` (n, N, 3) holds the points each of the ``n`` cameras sees (NaN: none): one
+    projection for all cameras, each with its own lens (the Brown model of
+    :func:`spotlab.geometry.distortion.distort_normalized`, per camera).
+    """
+    R = np.stack([c.R for c in cams])  # (n, 3, 3)
+    t = np.stack([c.t for c in cams])  # (n, 3)
+    K = np.stack([c.K for c in cams])  # (n, 3, 3)
+    k1, k2, p1, p2, k3 = np.stack([c.dist for c in cams]).T[:, :, None]  # (n, 1) each
+    with np.errstate(invalid="ignore", divide="ignore"):
+        xc = np.einsum("nij,nkj->nki", R, P) + t[:, None, :]
+        z = xc[..., 2]
+        good = np.isfinite(z) & (z > 100.0)
+        zz = np.where(good, z, 1.0)
+        x, y = xc[..., 0] / zz, xc[..., 1] / zz
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    u = K[:, 0, 0, None] * xd + K[:, 0, 1, None] * yd + K[:, 0, 2, None]
+    v = K[:, 1, 1, None] * yd + K[:, 1, 2, None]
+    uv = np.where(good[..., None], np.stack([u, v], axis=-1), np.nan)
+    size = np.array([c.size for c in cams], dtype=np.float64)  # (n, 2)
+    diameter = np.where(good, K[:, 0, 0, None] * model.marker_diameter_mm / zz, 0.0)
     peak = np.where(good, model.peak_at_4m * (4000.0 / zz) ** 2, 0.0)
     with np.errstate(invalid="ignore"):
-        inside = good & (uv >= 0).all(axis=1) & (uv[:, 0] <= w - 1) & (uv[:, 1] <= h - 1)
+        inside = good & (uv >= 0).all(axis=-1) & (uv <= size[:, None, :] - 1).all(axis=-1)
     return uv, diameter, peak, np.asarray(inside)
 
 
@@ -197,125 +216,177 @@ def render_camera(
         Sunlight blobs to add (random, bright).
     """
     m = X.shape[0]
-    with_ghosts = ghosts is not None and bool(ghosts.any())
-    pts = np.concatenate([X, X[ghosts] * np.array([1.0, 1.0, -1.0])]) if with_ghosts else X
-    uv, diam, peak, inside = _project(cam, pts, model)
-    marker = np.concatenate([np.arange(m), np.full(pts.shape[0] - m, -1)]).astype(np.int64)
-    kind = np.full(pts.shape[0], KIND_GHOST, np.int8)
-    kind[:m] = KIND_MARKER
-    peak[m:] *= model.ghost_gain
-    if capsules is not None and inside[:m].any():
+    blocked = np.zeros(m, dtype=bool) if hidden is None else np.asarray(hidden, dtype=bool)
+    if capsules is not None:
         on = on_capsule if on_capsule is not None else np.zeros((m, capsules[2].size), bool)
-        vis = np.flatnonzero(inside[:m])
-        inside[vis] &= ~sight_blocked(cam.center[None], X[vis], *capsules, on[vis])[0]
+        with np.errstate(invalid="ignore"):
+            blocked = blocked | sight_blocked(cam.center[None], X, *capsules, on)[0]
+    return render_cameras(
+        [cam], X[None], model, rng, hidden=blocked[None],
+        ghosts=None if ghosts is None else np.asarray(ghosts, dtype=bool)[None],
+        sun_blobs=[sun_blobs],
+    )[0]  # fmt: skip
+
+
+def render_cameras(
+    cams: list[Camera],
+    X: F64,
+    model: BlobModel,
+    rng: np.random.Generator,
+    *,
+    hidden: B | None = None,
+    ghosts: B | None = None,
+    sun_blobs: list[int] | None = None,
+) -> list[CameraBlobs]:
+    """The blobs of ``n`` cameras in one frame, rendered together.
+
+    Parameters
+    ----------
+    cams : list of Camera, length n
+        The cameras.
+    X : ndarray, shape (n, M, 3)
+        Marker positions at each camera's exposure mid-point (mm; NaN: absent).
+    model : BlobModel
+        Sizes, noise, ghosts.
+    rng : Generator
+        Noise source.
+    hidden : ndarray of bool, shape (n, M), optional
+        Markers occluded from each camera (:func:`sight_blocked`).
+    ghosts : ndarray of bool, shape (n, M), optional
+        Markers whose floor reflection each camera sees.
+    sun_blobs : list of int, length n, optional
+        Sunlight blobs to add per camera (random, bright).
+
+    Returns
+    -------
+    list of CameraBlobs, length n
+        Each camera's blobs as :func:`render_camera` describes them.
+    """
+    n, m = X.shape[0], X.shape[1]
+    if ghosts is not None and ghosts.any():
+        mirror = X * np.array([1.0, 1.0, -1.0])
+        P = np.concatenate([X, np.where(ghosts[..., None], mirror, np.nan)], axis=1)
+    else:
+        P = X
+    uv, diam, peak, inside = _project_many(cams, P, model)
+    peak[:, m:] *= model.ghost_gain
     if hidden is not None:
-        inside[:m] &= ~hidden
-    seen = np.where(inside[:m], OWN_BLOB, HIDDEN).astype(np.int8)
-    n_noise = int(rng.poisson(model.noise_blobs)) if model.noise_blobs > 0 else 0
-    if n_noise or sun_blobs:
-        w, h = cam.size
-        extra = n_noise + sun_blobs
-        uv = np.concatenate([uv, rng.uniform([0, 0], [w - 1, h - 1], (extra, 2))])
-        diam = np.concatenate([diam, rng.uniform(1.5, 3.0, n_noise), rng.uniform(2, 6, sun_blobs)])
-        peak = np.concatenate([peak, np.full(n_noise, 60.0), np.full(sun_blobs, 400.0)])
-        marker = np.concatenate([marker, np.full(extra, -1, np.int64)])
-        kind = np.concatenate(
-            [kind, np.full(n_noise, KIND_NOISE, np.int8), np.full(sun_blobs, KIND_SUN, np.int8)]
-        )
-        inside = np.concatenate([inside, np.ones(extra, dtype=bool)])
-    idx = np.flatnonzero(inside)
-    true_uv, d, pk, marker, kind = uv[idx], diam[idx], peak[idx], marker[idx], kind[idx]
+        inside[:, :m] &= ~hidden
+    seen = np.where(inside[:, :m], OWN_BLOB, HIDDEN).astype(np.int8)  # (n, M)
+    cam_of, point = np.nonzero(inside)  # camera-major: blobs grouped by camera
+    cam_of = cam_of.astype(np.int64)
+    marker = np.where(point < m, point, -1).astype(np.int64)
+    kind = np.where(point < m, KIND_MARKER, KIND_GHOST).astype(np.int8)
+    true_uv, d, pk = uv[cam_of, point], diam[cam_of, point], peak[cam_of, point]
+    sun = np.zeros(n, np.int64) if sun_blobs is None else np.asarray(sun_blobs, np.int64)
+    n_noise = np.asarray(
+        rng.poisson(model.noise_blobs, n) if model.noise_blobs > 0 else np.zeros(n), np.int64
+    )
+    if n_noise.any() or sun.any():
+        size = np.array([c.size for c in cams], dtype=np.float64) - 1  # (n, 2)
+        ec = np.concatenate([np.repeat(np.arange(n), n_noise), np.repeat(np.arange(n), sun)])
+        k_noise = int(n_noise.sum())
+        e_uv = rng.uniform(0.0, 1.0, (ec.size, 2)) * size[ec]
+        e_d = np.concatenate([rng.uniform(1.5, 3.0, k_noise), rng.uniform(2, 6, ec.size - k_noise)])
+        is_noise = np.arange(ec.size) < k_noise
+        order = np.argsort(np.concatenate([cam_of, ec]), kind="stable")
+        cam_of = np.concatenate([cam_of, ec])[order]
+        true_uv = np.concatenate([true_uv, e_uv])[order]
+        d = np.concatenate([d, e_d])[order]
+        pk = np.concatenate([pk, np.where(is_noise, 60.0, 400.0)])[order]
+        marker = np.concatenate([marker, np.full(ec.size, -1, np.int64)])[order]
+        e_kind = np.where(is_noise, KIND_NOISE, KIND_SUN).astype(np.int8)
+        kind = np.concatenate([kind, e_kind])[order]
     area = np.maximum(np.pi * d * d / 4, 1.0)
-    flags = np.zeros(idx.size, dtype=np.uint8)
-    if 1 < idx.size <= MERGE_LIMIT:
-        true_uv, d, pk, area, marker, kind, flags = _merge(true_uv, d, pk, area, marker, kind, seen)
-    return _finish(cam, true_uv, d, pk, area, marker, kind, flags, seen, model, rng)
+    flags = np.zeros(cam_of.size, dtype=np.uint8)
+    cols = _merge_many(n, cam_of, true_uv, d, pk, area, marker, kind, flags, seen)
+    return _finish_many(cams, *cols, seen, model, rng)
 
 
-def _finish(
-    cam: Camera, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
+_Cols = tuple[I64, F64, F64, F64, F64, I64, npt.NDArray[np.int8], npt.NDArray[np.uint8]]
+
+
+def _merge_many(
+    n: int, cam_of: I64, uv: F64, d: F64, pk: F64, area: F64, marker: I64,
+    kind: npt.NDArray[np.int8], flags: npt.NDArray[np.uint8], seen: npt.NDArray[np.int8],
+) -> _Cols:  # fmt: skip
+    """Blobs whose discs overlap become one (area-weighted centroid, merged flag).
+
+    Discs are tested pairwise within each camera (one padded test for all cameras);
+    the blobs that touch, directly or through others, form one blob. Images with more
+    than :data:`MERGE_LIMIT` blobs (sunlight) are not tested. The member marker with
+    the largest image names a merged blob; ``seen`` marks its members ``IN_MERGED``.
+    """
+    counts = np.bincount(cam_of, minlength=n)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    todo = np.flatnonzero((counts > 1) & (counts <= MERGE_LIMIT))
+    cols: _Cols = (cam_of, uv, d, pk, area, marker, kind, flags)
+    if todo.size == 0:
+        return cols
+    slot = np.arange(int(counts[todo].max()))
+    valid = slot < counts[todo][:, None]
+    idx = np.where(valid, starts[todo][:, None] + slot, 0)
+    pu, pv = np.where(valid, uv[idx, 0], np.nan), uv[idx, 1]
+    pd = d[idx]
+    du = pu[:, :, None] - pu[:, None, :]
+    dv = pv[:, :, None] - pv[:, None, :]
+    reach = pd[:, :, None] + pd[:, None, :]
+    with np.errstate(invalid="ignore"):
+        touch = np.triu(4 * (du * du + dv * dv) < reach * reach, k=1)
+    j, a, b = np.nonzero(touch)
+    if j.size == 0:
+        return cols
+    N = cam_of.size
+    graph = coo_matrix((np.ones(j.size), (idx[j, a], idx[j, b])), shape=(N, N))
+    ncomp, label = connected_components(graph, directed=False)
+    size = np.bincount(label, minlength=ncomp)
+    wsum = np.bincount(label, area, ncomp)
+    out_uv = np.stack([np.bincount(label, area * uv[:, k], ncomp) / wsum for k in (0, 1)], 1)
+    out_pk = np.zeros(ncomp)
+    np.maximum.at(out_pk, label, pk)
+    first = np.full(ncomp, -1)
+    first[label[::-1]] = np.arange(N)[::-1]
+    out_marker = np.full(ncomp, -1, np.int64)
+    named = np.flatnonzero(marker >= 0)
+    by_area = named[np.lexsort((area[named], label[named]))]  # largest last per component
+    out_marker[label[by_area]] = marker[by_area]
+    merged = size > 1
+    out_kind = np.where(merged, KIND_MERGED, kind[first]).astype(np.int8)
+    members = (marker >= 0) & merged[label]
+    seen[cam_of[members], marker[members]] = IN_MERGED
+    out_flags = np.where(merged, MERGED, 0).astype(np.uint8)
+    out_d = np.asarray(2 * np.sqrt(wsum / np.pi), np.float64)
+    head = (cam_of[first], out_uv, out_d, out_pk, np.asarray(wsum, np.float64), out_marker)
+    return (*head, out_kind, out_flags)
+
+
+def _finish_many(
+    cams: list[Camera], cam_of: I64, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
     kind: npt.NDArray[np.int8], flags: npt.NDArray[np.uint8], seen: npt.NDArray[np.int8],
     model: BlobModel, rng: np.random.Generator,
-) -> CameraBlobs:  # fmt: skip
-    """Noise, flags and scan order."""
-    w, h = cam.size
+) -> list[CameraBlobs]:  # fmt: skip
+    """Noise, flags and scan order (top row first), then one :class:`CameraBlobs` per camera."""
+    n = len(cams)
+    size = np.array([c.size for c in cams], dtype=np.float64)[cam_of] - 1  # (N, 2)
     r = d / 2
-    noisy = np.clip(
-        true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape), 0, [w - 1, h - 1]
-    )
-    edge = (
-        (true_uv - r[:, None] < 0).any(axis=1)
-        | (true_uv[:, 0] + r > w - 1)
-        | (true_uv[:, 1] + r > h - 1)
-    )
+    noisy = np.clip(true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape), 0, size)
+    edge = (true_uv - r[:, None] < 0).any(axis=1) | (true_uv + r[:, None] > size).any(axis=1)
     flags = (
         flags
         | np.where(edge, EDGE, 0).astype(np.uint8)
         | np.where(pk > 255, SATURATED, 0).astype(np.uint8)
     )
-    order = np.lexsort((true_uv[:, 0], true_uv[:, 1] - r))
-    return CameraBlobs(
-        uv=noisy[order], area=np.rint(area[order]), peak=np.minimum(pk[order], 255.0),
-        flags=flags[order], marker=marker[order], kind=kind[order], true_uv=true_uv[order],
-        seen=seen,
-    )  # fmt: skip
-
-
-def _merge(
-    uv: F64, d: F64, pk: F64, area: F64, marker: I64, kind: npt.NDArray[np.int8],
-    seen: npt.NDArray[np.int8],
-) -> tuple[F64, F64, F64, F64, I64, npt.NDArray[np.int8], npt.NDArray[np.uint8]]:  # fmt: skip
-    """Blobs whose discs overlap become one (area-weighted centroid, merged flag)."""
-    n = uv.shape[0]
-    du = np.subtract.outer(uv[:, 0], uv[:, 0])
-    dv = np.subtract.outer(uv[:, 1], uv[:, 1])
-    reach = np.add.outer(d, d)
-    touch = 4 * (du * du + dv * dv) < reach * reach  # the diagonal is always true
-    flags = np.zeros(n, dtype=np.uint8)
-    if np.count_nonzero(touch) == n:
-        return uv, d, pk, area, marker, kind, flags
-    np.fill_diagonal(touch, False)
-    parent = list(range(n))
-
-    def root(k: int) -> int:
-        while parent[k] != k:
-            k = parent[k]
-        return k
-
-    for i, j in zip(*np.nonzero(np.triu(touch)), strict=True):
-        parent[root(int(i))] = root(int(j))
-    roots = np.array([root(k) for k in range(n)])
-    _, label = np.unique(roots, return_inverse=True)
-    ncomp = int(label.max()) + 1
-    size = np.bincount(label, minlength=ncomp)
-    wsum = np.bincount(label, area, ncomp)
-    out_uv = np.stack([np.bincount(label, area * uv[:, k], ncomp) / wsum for k in (0, 1)], 1)
-    out_area = wsum
-    out_d = 2 * np.sqrt(out_area / np.pi)
-    out_pk = np.zeros(ncomp)
-    np.maximum.at(out_pk, label, pk)
-    # The member marker with the largest image names a merged blob.
-    out_marker = np.full(ncomp, -1, np.int64)
-    best = np.full(ncomp, -1.0)
-    for k in np.argsort(area):
-        if marker[k] >= 0 and area[k] > best[label[k]]:
-            best[label[k]] = area[k]
-            out_marker[label[k]] = marker[k]
-    out_kind = np.zeros(ncomp, np.int8)
-    first = np.full(ncomp, -1)
-    first[label[::-1]] = np.arange(n)[::-1]
-    out_kind[:] = kind[first]
-    merged = size > 1
-    out_kind[merged] = KIND_MERGED
-    members = marker[(marker >= 0) & merged[label]]
-    seen[members] = IN_MERGED
-    out_flags = np.where(merged, MERGED, 0).astype(np.uint8)
-    return (
-        out_uv,
-        np.asarray(out_d, np.float64),
-        out_pk,
-        np.asarray(out_area, np.float64),
-        out_marker,
-        out_kind,
-        out_flags,
-    )
+    order = np.lexsort((true_uv[:, 0], true_uv[:, 1] - r, cam_of))
+    bounds = np.searchsorted(cam_of[order], np.arange(n + 1))
+    uv_o, area_o, pk_o = noisy[order], np.rint(area[order]), np.minimum(pk[order], 255.0)
+    fl_o, mk_o, kd_o, tu_o = flags[order], marker[order], kind[order], true_uv[order]
+    out = []
+    for c in range(n):
+        s = slice(int(bounds[c]), int(bounds[c + 1]))
+        out.append(
+            CameraBlobs(
+                uv=uv_o[s], area=area_o[s], peak=pk_o[s], flags=fl_o[s], marker=mk_o[s],
+                kind=kd_o[s], true_uv=tu_o[s], seen=seen[c],
+            )
+        )  # fmt: skip
+    return out

@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from spotlab.geometry import Rig
 from spotlab.simulators import centroid_wire as cw
-from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_camera, sight_blocked
+from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_cameras, sight_blocked
 from spotlab.simulators.centroid_body import GaitBody, carried_by, segment_capsules
 from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
@@ -48,7 +48,7 @@ FIRMWARE = "1.0"
 PROCESSING_S = 300e-6
 #: Sunlight blobs per frame on a sunlit camera.
 SUN_BLOBS = 3000
-FIFO_BYTES = 1 << 18
+FIFO_BYTES = 1 << 20
 _EMPTY = np.zeros((0, 0), dtype=np.uint16)
 _NO_READING = PsdReading(
     x=_EMPTY, y=_EMPTY, intensity=_EMPTY.astype(np.uint8), flags=_EMPTY.astype(np.uint8),
@@ -126,15 +126,20 @@ class CentroidStream(SpxStream):
         X_both = dev.positions(np.append(scene_s, t_mid))  # (n + 1, M, 3)
         X_all = X_both[:-1]
         hidden = dev.occluded(X_all[0], self.cams)
+        live = [j for j, c in enumerate(self.cams) if online[j]]
+        rendered = dict(
+            zip(live, dev.render_many([self.cams[j] for j in live], X_all[live], hidden[live],
+                [SUN_BLOBS if any(e.active(self.cams[j], since_start) for e in dev.sunlight)
+                 else 0 for j in live]), strict=True)
+        )  # fmt: skip
         records = []
         truth_cams: list[CameraTruth] = []
         for j, c in enumerate(self.cams):
-            if not online[j]:
+            if j not in rendered:
                 records.append(cw.CameraRecord(c, cw.CAM_OFFLINE, 0, self.frame_no, 0, _NO_BLOBS))
                 truth_cams.append(None)
                 continue
-            sun = SUN_BLOBS if any(e.active(c, since_start) for e in dev.sunlight) else 0
-            blobs = dev.render(c, X_all[j], sun, hidden[j])
+            blobs = rendered[j]
             n_found = blobs.uv.shape[0]
             keep = min(n_found, cfg.max_blobs)
             tick = round(dev.camera_clocks[c].device_us(round(w_exp[j])))
@@ -297,9 +302,18 @@ class CentroidDevice(SelspotDevice):
         self, camera: int, X: F64, sun_blobs: int = 0, hidden: npt.NDArray[np.bool_] | None = None
     ) -> CameraBlobs:
         """One camera's blobs for markers ``X`` (M, 3) (see :func:`render_camera`)."""
-        return render_camera(
-            self.rig.cameras[camera], X, self.model, self._blob_rng, hidden=hidden,
-            ghosts=self.ghost_pairs[camera], sun_blobs=sun_blobs,
+        return self.render_many([camera], X[None], None if hidden is None else hidden[None],
+                                [sun_blobs])[0]  # fmt: skip
+
+    def render_many(
+        self, cameras: list[int], X: F64, hidden: npt.NDArray[np.bool_] | None,
+        sun_blobs: list[int],
+    ) -> list[CameraBlobs]:  # fmt: skip
+        """The blobs of several cameras in one frame, markers ``X`` (n, M, 3) per camera
+        (see :func:`render_cameras`)."""
+        return render_cameras(
+            [self.rig.cameras[c] for c in cameras], X, self.model, self._blob_rng,
+            hidden=hidden, ghosts=self.ghost_pairs[cameras], sun_blobs=sun_blobs,
         )  # fmt: skip
 
     # -- life cycle ----------------------------------------------------------------

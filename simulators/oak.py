@@ -50,7 +50,10 @@ class FakeOakDevice:
 
     Frame ``k`` is exposed around ``start + k / fps`` (host clock); its marker
     positions are the motion's at that instant. Each call of :meth:`frames` returns
-    the next frame of every camera (no pacing: tests run as fast as the host).
+    the next frame of every camera (no pacing: tests run as fast as the host). Like a
+    running depthai pipeline it refuses a second :meth:`start`; :meth:`stop` lets a
+    new run begin (frames count from 0 again). ``info`` says what a real board would
+    report (USB ``SUPER``; the first images' format and FSIN mode).
 
     Parameters
     ----------
@@ -112,6 +115,9 @@ class FakeOakDevice:
         self.rng = np.random.default_rng(seed)
         self.settings: Any = None
         self.opened = self.started = self.closed = False
+        #: What the board reported at start (a real board: USB speed, sensors).
+        self.info: dict[str, str] = {}
+        self.starts = 0
         self._k = 0
         self._start_ns = 0
 
@@ -130,8 +136,17 @@ class FakeOakDevice:
         """Start the virtual exposure clock now."""
         if not self.opened:
             raise DeviceError(f"fake OAK {self.mxid}: open() before start()")
+        if self.started:
+            raise DeviceError(f"fake OAK {self.mxid}: the pipeline is already running")
         self._start_ns = time.monotonic_ns()
+        self._k = 0
         self.started = True
+        self.starts += 1
+        self.info = {"usb_speed": "SUPER"}
+
+    def stop(self) -> None:
+        """Stop streaming; :meth:`start` may follow (frames count from 0 again)."""
+        self.started = False
 
     def frames(self, timeout: float) -> list[FakeFrame]:
         """The next frame of every camera; none once ``n_frames`` are out."""
@@ -142,6 +157,8 @@ class FakeOakDevice:
             return []
         k = self._k
         self._k += 1
+        if k == 0:
+            self._report_first()
         host_ns = self.exposure_mid_ns(k)
         device_ns = round(self.clock.device_us(host_ns) * 1000)
         out = []
@@ -165,6 +182,16 @@ class FakeOakDevice:
                 )
             )
         return out
+
+    def _report_first(self) -> None:
+        """What a real board's first images say: GRAY8 at the asked size, and the FSIN
+        mode the sensor ran in (master: first socket drives, the others follow)."""
+        w, h = self.settings.size
+        for i, socket in enumerate(self.sockets):
+            self.info[f"format.{socket}"] = f"GRAY8 {w}x{h}"
+            sync = self.settings.sync
+            mode = {"master": "OUTPUT" if i == 0 else "INPUT", "slave": "INPUT"}.get(sync, "NONE")
+            self.info[f"fsync.{socket}"] = mode
 
     def close(self) -> None:
         """Stop; safe twice."""

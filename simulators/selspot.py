@@ -69,6 +69,8 @@ class SelspotDevice(SpxCommands):
         Frame rate after reset or ``INIT:`` (the spec's default is 100 Hz).
     fifo_bytes : int
         Transmit FIFO size: a frame that does not fit is dropped (FIFO overflow).
+        Bytes the transport holds because the host does not read count against it
+        (:attr:`host_backlog`: hardware flow control, MCS-1 §4).
     mark_simulated : bool
         Set header flag bit 2 ("simulated device") in every frame.
     now_ns : int, optional
@@ -107,6 +109,12 @@ class SelspotDevice(SpxCommands):
         self.psd = psd if psd is not None else PsdModel()
         self.serial = serial
         self.fifo_bytes = fifo_bytes
+        #: Bytes released to the transport that the host has not taken yet (the
+        #: transport sets it): flow control holds them in the FIFO, so a host that
+        #: falls behind sees whole frames dropped, never frames cut into CRC errors.
+        self.host_backlog = 0
+        #: Resets and power-ups so far (a transport clears the bytes it holds back).
+        self.resets = 0
         self.mark_simulated = mark_simulated
         self._default_rate_mhz = rate_mhz
         noise, garble = np.random.SeedSequence([seed, 0x5E15]).spawn(2)
@@ -336,6 +344,7 @@ class SelspotDevice(SpxCommands):
     def _power_on(self, t: int, fault: FaultEntry | None) -> None:
         """Reset, BREAK or power-up: 9600 baud, defaults, stream stopped, banner."""
         self.line.cut(t, None if fault is None else fault.id)
+        self.resets += 1  # the transport drops what flow control still held in the FIFO
         self._stream = None
         self._overflow_left = 0
         self._asm.clear()
@@ -364,7 +373,7 @@ class SelspotDevice(SpxCommands):
         if self._overflow_left > 0:
             self._overflow_left -= 1
             drop = self._drop_entry
-        elif self.line.backlog(t) + size > self.fifo_bytes:
+        elif self.line.backlog(t) + self.host_backlog + size > self.fifo_bytes:
             last = self._drop_entry
             if last is None or last.kind != "fifo" or last.frame_no[-1] != taken.frame_no - 1:
                 last = log.new("fifo", self.faults.since_start(t), t, "device", None)

@@ -60,6 +60,11 @@ log = logging.getLogger(__name__)
 RETRY_INTERVAL = 0.05
 #: Longest wait for the banner while recovering (s): a returning device answers in ms.
 RECOVERY_RESET_WAIT = 0.5
+#: Bytes (at least) that may arrive without a valid frame before the link counts as garbage
+#: (one longest MCS-1 frame).
+MIN_FRAME_WINDOW = 1 << 16
+#: A reply behind data frames is awaited at most this many reply timeouts in all.
+REPLY_BEHIND_DATA = 5
 #: Faults after which the driver tries to recover instead of raising.
 _TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
 
@@ -182,6 +187,10 @@ class Mcs1Driver(Driver):
         self._idle_flush_ns = int(max(0.05, 3 * send_s) * 1e9)
         self._last_frame_ns = 0
         self._last_rx_ns = 0
+        # Bytes read since the last valid frame; more than this many means garbage
+        # (a device at another baud rate), not a host that fell behind.
+        self._rx_since_frame = 0
+        self._garbage_bytes = 2 * max(config.frame_bytes, MIN_FRAME_WINDOW)
 
     @abstractmethod
     def _check_device(self, reply: Reply) -> None:
@@ -301,11 +310,25 @@ class Mcs1Driver(Driver):
             log.warning("%s: port lost while stopping: %s", self.port, exc)
         self._tap_event("stopped")
 
+    def drain(self) -> list[FrameBlock]:
+        """Frames decoded but not yet returned by :meth:`recv` (those that arrived while
+        the driver waited for its reply to ``STOP:``), handed over once."""
+        blocks, self._stash = self._stash, []
+        return blocks
+
     def _await_event_reply(self, command: str, okay_only: bool = False) -> Reply:
-        """Decode frames until the reply's event frame; keep the frames for ``recv``."""
-        deadline = time.monotonic() + self.reply_timeout
+        """Decode frames until the reply's event frame; keep the frames for ``recv``.
+
+        The reply queues behind the data frames already in the device's FIFO: while
+        frames keep arriving the device is alive, so the wait lasts ``reply_timeout``
+        after the last byte (at most :data:`REPLY_BEHIND_DATA` times ``reply_timeout``).
+        """
+        start = time.monotonic()
+        deadline = start + self.reply_timeout
+        latest = start + REPLY_BEHIND_DATA * self.reply_timeout
         while True:
-            self._read_and_decode(deadline - time.monotonic())
+            if self._read_and_decode(deadline - time.monotonic(), flush_idle=True) is not None:
+                deadline = min(latest, time.monotonic() + self.reply_timeout)
             for event in self._decoder.take_events():
                 try:
                     reply = parse_reply(event.payload)
@@ -330,16 +353,29 @@ class Mcs1Driver(Driver):
             self._tap_event("close", port=self.port)
 
     # -- streaming -----------------------------------------------------------------
-    def _read_and_decode(self, timeout: float | None) -> FrameBlock | None:
-        """One read, decoded; flush a frame that stopped arriving. Frames go to the stash."""
+    def _read_and_decode(
+        self, timeout: float | None, *, flush_idle: bool = False
+    ) -> FrameBlock | None:
+        """One read, decoded; frames go to the stash.
+
+        With ``flush_idle`` (waiting for a reply), a frame that stopped arriving is
+        flushed as truncated so that the reply behind it is not held back. While
+        streaming it is not: a device (or a simulator on a busy host) that pauses
+        within a frame sends the rest later, and a frame that really was truncated
+        is resolved by the frames after it (CRC failure, then resynchronisation).
+        """
         data, t_ns = self._link.read(None if timeout is None else max(0.0, timeout))
         block = self._decoder.feed(data, t_ns) if data else None
         if data:
             self._last_rx_ns = t_ns
-        elif self._decoder.buffered and t_ns - self._last_rx_ns > self._idle_flush_ns:
+            self._rx_since_frame += len(data)
+        elif (
+            flush_idle and self._decoder.buffered and t_ns - self._last_rx_ns > self._idle_flush_ns
+        ):
             block = self._decoder.flush()
         if block is not None and len(block):
             self._last_frame_ns = t_ns
+            self._rx_since_frame = 0
             self._stash.append(block)
         return block
 
@@ -361,7 +397,13 @@ class Mcs1Driver(Driver):
         if self._decoder.banner_seen:
             self._decoder.banner_seen = False
             self._begin_recovery("device_reset", "the device sent its reset banner")
-        elif now - self._last_frame_ns > self._silence_ns:
+        elif now - self._last_frame_ns > self._silence_ns and (
+            now - self._last_rx_ns > self._silence_ns
+            or self._rx_since_frame > self._garbage_bytes
+            or now - self._last_frame_ns > 4 * self._silence_ns
+        ):
+            # Silence, or bytes that hold no frame. A host that was itself held up
+            # (a busy machine) finds the frames waiting for it: that is no fault.
             self._begin_recovery(
                 "device_reset", f"no valid frame for {(now - self._last_frame_ns) / 1e9:.2f} s"
             )

@@ -19,6 +19,7 @@ from spotlab.drivers.oak.seam import (
     CameraSettings,
     OakCamera,
     OakFrameLike,
+    OakInUseError,
     SyncRole,
     UsbPermissionError,
 )
@@ -34,6 +35,7 @@ __all__ = [
     "OakDriver",
     "OakFrame",
     "OakFrameLike",
+    "OakInUseError",
     "OakRecordDecoder",
     "SyncRole",
     "UsbPermissionError",

@@ -6,10 +6,10 @@ import os
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any
 
-from spotlab.core.errors import ConfigurationError, DeviceError
+from spotlab.core.errors import ConfigurationError, DeviceDisconnected, DeviceError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.base import DeviceInfo, Driver
@@ -21,6 +21,8 @@ from spotlab.imaging import find_blobs
 #: A camera whose frames lag the others by this many periods is declared offline
 #: for the frames it missed, so one dead camera never stalls the stream.
 MAX_WAIT_PERIODS = 3
+#: With several boards, the wait for the first frame polls them in turn this often (s).
+POLL_S = 0.002
 
 
 class OakDriver(Driver):
@@ -103,7 +105,10 @@ class OakDriver(Driver):
         """Spec, boards, camera settings, centroid gates and the journal layout."""
         return {
             **super().metadata(),
-            "boards": [{"mxid": b.mxid, "sockets": list(b.sockets)} for b in self.boards],
+            "boards": [
+                {"mxid": b.mxid, "sockets": list(b.sockets), "reported": dict(b.info)}
+                for b in self.boards
+            ],
             "settings": asdict(self.settings),
             "centroid": dict(self.gates),
             "layout": MAGIC.decode(),
@@ -112,17 +117,22 @@ class OakDriver(Driver):
 
     @classmethod
     def detect(cls) -> list[DeviceInfo]:
-        """OAK boards depthai sees (none when depthai is not installed)."""
+        """OAK boards on the bus, the ones this user may not open included (none when
+        depthai is not installed). A board without permission has no MxId yet: its
+        port is empty and its description says to install the udev rule."""
         try:
-            from spotlab.drivers.oak.depthai_camera import find_devices
+            from spotlab.drivers.oak.depthai_camera import PERMISSION, find_devices
 
             found = find_devices()
         except ConfigurationError:
             return []
-        return [
-            DeviceInfo("oak", mxid, f"OAK ({state}, {status})", mxid)
-            for mxid, state, status in found
-        ]
+        out = []
+        for mxid, usb, state, status in found:
+            what = f"OAK at USB {usb} ({state}, {status})"
+            if status == PERMISSION:
+                what += ": no permission, run `spotlab udev install`"
+            out.append(DeviceInfo("oak", mxid, what, mxid, {"usb": usb, "state": state}))
+        return out
 
     # -- life cycle ------------------------------------------------------------------
     def _start(self) -> None:
@@ -132,7 +142,7 @@ class OakDriver(Driver):
                 sync = self.settings.sync
                 if many:
                     sync = "master" if i == 0 else "slave"
-                settings = CameraSettings(**{**asdict(self.settings), "sync": sync})
+                settings = replace(self.settings, sync=sync)
                 try:
                     board.open(settings)
                 except BaseException:
@@ -140,12 +150,26 @@ class OakDriver(Driver):
                     raise
                 self._tap_event("open", port=board.mxid, sync=sync)
             self._open = True
-        for board in self.boards:
-            board.start()
+        started: list[OakCamera] = []
+        try:
+            for board in self.boards:
+                board.start()
+                started.append(board)
+                self._tap_event("configured", port=board.mxid, **board.info)
+        except BaseException:
+            for board in started:
+                board.stop()
+            raise
         self._tap_event("started")
 
     def _stop(self) -> None:
-        self._tap_event("stopped")
+        try:
+            for board in self.boards:
+                board.stop()
+        finally:
+            # Images of a stopped run never match the next run's: drop them.
+            self._pending = [deque() for _ in self.cameras]
+            self._tap_event("stopped")
 
     def _close(self) -> None:
         for board in self.boards:
@@ -159,9 +183,12 @@ class OakDriver(Driver):
         if not self._started and not self._open:
             raise DeviceError(f"{self.name} ({self.port}) is not streaming: call start() first")
         wait = 1.0 if timeout is None else timeout
-        for i, board in enumerate(self.boards):
-            for frame in board.frames(wait if i == 0 else 0.0):
-                self._ingest(board.mxid, frame)
+        try:
+            for mxid, frame in self._read(wait):
+                self._ingest(mxid, frame)
+        except DeviceDisconnected as exc:
+            self._tap_event("disconnected", port=self.port, error=str(exc))
+            raise
         records = b"".join(encode_frame(self._next_seq(), shots) for shots in self._matched())
         if not records:
             return None
@@ -169,6 +196,24 @@ class OakDriver(Driver):
         self.stats.bytes += len(records)
         self._tap_rx(records, arrival_ns)
         return self._decoder.feed(records, arrival_ns)
+
+    def _read(self, wait: float) -> list[tuple[str, OakFrameLike]]:
+        """Frames of every board, waiting up to ``wait`` s for the first on any of them.
+
+        One board waits in depthai on all its queues at once; several are polled in
+        turn in slices of :data:`POLL_S`, so a dead board never delays the others by
+        more than a slice.
+        """
+        deadline = time.monotonic() + wait
+        while True:
+            got = []
+            for board in self.boards:
+                step = wait if len(self.boards) == 1 else 0.0
+                got += [(board.mxid, f) for f in board.frames(step)]
+            left = deadline - time.monotonic()
+            if got or left <= 0 or len(self.boards) == 1:
+                return got
+            time.sleep(min(POLL_S, left))
 
     def _next_seq(self) -> int:
         self._seq += 1

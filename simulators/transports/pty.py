@@ -38,9 +38,9 @@ from spotlab.simulators.selspot import SelspotDevice
 TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on Linux
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
-MAX_PENDING = 1 << 16
-#: ... or this many seconds of the line's bytes, if more (12 Mbaud: 600 kB).
-MAX_PENDING_S = 0.5
+#: Bytes an adapter and the host's driver take in before flow control holds the device
+#: back (what waits beyond this counts against the device's FIFO).
+HOST_SLACK = 1 << 16
 
 
 def tty_baud(fd: int) -> int | None:
@@ -76,7 +76,9 @@ class PtyServer:
         The stable link to open (valid after :meth:`start`).
     stats : dict
         ``bytes_out``, ``bytes_in``, ``overrun_bytes`` (output the host did not
-        read in time and the pty could not hold), ``reconnects``.
+        read in time and the pty could not hold; flow control keeps it at 0: the
+        device sees what waits here in ``host_backlog`` and drops whole frames from
+        its FIFO instead), ``reconnects``.
     """
 
     def __init__(self, device: SelspotDevice, name: str = "selspot") -> None:
@@ -87,6 +89,7 @@ class PtyServer:
         self._master: int | None = None
         self._slave: int | None = None
         self._pending = bytearray()
+        self._resets_seen = device.resets
         self._rng = np.random.default_rng(0x9714)
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
@@ -182,12 +185,17 @@ class PtyServer:
         master = self._master
         assert master is not None
         host_baud = tty_baud(master)
+        if self.device.resets != self._resets_seen:  # a reset emptied the FIFO
+            self._resets_seen = self.device.resets
+            self._pending.clear()
+        self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
         for seg in self.device.output_segments(now):
             data = seg.data
             if host_baud is not None and host_baud != seg.baud:
                 data = garble(data, seg.baud, host_baud, self._rng)
             self._pending += data
-        self._flush_pending(master, max(MAX_PENDING, int((host_baud or 0) * MAX_PENDING_S / 10)))
+        self._flush_pending(master, self.device.fifo_bytes + 2 * HOST_SLACK)
+        self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
         nxt = self.device.next_event_ns()
         wait = MAX_WAIT_S if nxt is None else min(max((nxt - now) / 1e9, MIN_WAIT_S), MAX_WAIT_S)
         writers = [master] if self._pending else []
@@ -206,7 +214,7 @@ class PtyServer:
             with contextlib.suppress(OSError):
                 os.read(self._wake_r, 64)
 
-    def _flush_pending(self, master: int, limit: int = MAX_PENDING) -> None:
+    def _flush_pending(self, master: int, limit: int) -> None:
         while self._pending:
             try:
                 n = os.write(master, self._pending)

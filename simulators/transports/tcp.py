@@ -21,7 +21,9 @@ from spotlab.simulators.selspot import SelspotDevice
 
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
-MAX_PENDING = 1 << 20
+#: Bytes an adapter and the host's driver take in before flow control holds the device
+#: back (what waits beyond this counts against the device's FIFO).
+HOST_SLACK = 1 << 16
 
 
 class TcpServer:
@@ -55,6 +57,7 @@ class TcpServer:
         self.stats = {"bytes_out": 0, "bytes_in": 0, "clients": 0, "refused": 0}
         self._client: socket.socket | None = None
         self._pending = bytearray()
+        self._resets_seen = device.resets
         self._stop = threading.Event()
         self._wake_r, self._wake_w = socket.socketpair()
         self._thread: threading.Thread | None = None
@@ -115,11 +118,16 @@ class TcpServer:
             down = self.device.link_down(now)
             if down:
                 self._drop_client()
+            if self.device.resets != self._resets_seen:  # a reset emptied the FIFO
+                self._resets_seen = self.device.resets
+                self._pending.clear()
+            self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
             segments = self.device.output_segments(now)
             if self._client is not None:
                 for seg in segments:
                     self._pending += seg.data
                 self._send_pending()
+            self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
             nxt = self.device.next_event_ns()
             wait = (
                 MAX_WAIT_S if nxt is None else min(max((nxt - now) / 1e9, MIN_WAIT_S), MAX_WAIT_S)
@@ -163,4 +171,4 @@ class TcpServer:
                 return
             self.stats["bytes_out"] += n
             del self._pending[:n]
-        del self._pending[MAX_PENDING:]
+        del self._pending[self.device.fifo_bytes + 2 * HOST_SLACK :]

@@ -18,7 +18,9 @@ def oak_driver(request: pytest.FixtureRequest) -> Iterator[OakDriver]:
     hw = hardware_ports(request.config).get("oak")
     if hw is not None:
         pytest.importorskip("depthai", reason="the oak extra is not installed")
-        driver = OakDriver(hw, settings=CameraSettings(fps=60.0, exposure_us=300))
+        # One board runs as FSIN master, so the suite checks its sensors' getFsync too.
+        settings = CameraSettings(fps=60.0, exposure_us=300, sync="master")
+        driver = OakDriver(hw, settings=settings)
     else:
         rig = oak_rig(4, seed=1)
         markers = reference_markers(8, seed=2)

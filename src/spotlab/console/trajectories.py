@@ -8,7 +8,7 @@ their cameras, else by order. Frames are triangulated in chunks
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -125,10 +125,17 @@ def check_outputs(paths: Sequence[Path]) -> None:
             raise CommandError(f"{path}: the folder {path.parent} does not exist")
 
 
-def write_trial(path: Path, trial: Trial) -> None:
-    """Write ``trial`` as C3D or TRC, chosen by the suffix of ``path``."""
+def write_trial(path: Path, trial: Trial, drop_groups: Collection[str] = ()) -> None:
+    """Write ``trial`` as C3D or TRC, chosen by the suffix of ``path``.
+
+    A C3D file gets every parameter group the trial's source file had, except those
+    named in ``drop_groups`` (:func:`spotlab.io.write_c3d`); TRC has no groups.
+    """
     check_outputs([path])
-    TRIAL_WRITERS[path.suffix.lower()](path, trial)
+    if path.suffix.lower() == ".c3d":
+        write_c3d(path, trial, drop=drop_groups)
+    else:
+        TRIAL_WRITERS[path.suffix.lower()](path, trial)
 
 
 def reconstruct(

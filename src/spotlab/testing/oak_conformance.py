@@ -102,6 +102,35 @@ class OakConformance:
         for field in ("seq", "ticks", "arrival_ns", "data", "flags", "status"):
             np.testing.assert_array_equal(getattr(again, field), getattr(live, field))
 
+    def test_boards_report_usb3_the_asked_format_and_fsync(self, oak_driver: OakDriver) -> None:
+        # What only a board can tell: depthai's getUsbSpeed and each camera's first
+        # ImgFrame (type, size, getFsync). Two 1280x800 GRAY8 cameras need USB 3.
+        with oak_driver:
+            _frames(oak_driver)
+            reported = [dict(b.info) for b in oak_driver.boards]
+        w, h = oak_driver.settings.size
+        for board, info in zip(oak_driver.boards, reported, strict=True):
+            assert info["usb_speed"] in ("SUPER", "SUPER_PLUS"), info
+            for socket in board.sockets:
+                assert info[f"format.{socket}"] == f"GRAY8 {w}x{h}", info
+            synced = len(oak_driver.boards) > 1 or oak_driver.settings.sync != "off"
+            if synced:
+                modes = [info[f"fsync.{s}"] for s in board.sockets]
+                assert "NONE" not in modes, info
+        meta = oak_driver.metadata()
+        assert [b["reported"]["usb_speed"] for b in meta["boards"]] == [
+            i["usb_speed"] for i in reported
+        ]
+
+    def test_start_after_stop_streams_again(self, oak_driver: OakDriver) -> None:
+        oak_driver.start()
+        first = _frames(oak_driver, 2)
+        oak_driver.stop()
+        oak_driver.start()
+        again = _frames(oak_driver, 2)
+        oak_driver.close()
+        assert again.ticks[0] > first.ticks[-1]
+
     def test_close_twice_is_safe(self, oak_driver: OakDriver) -> None:
         oak_driver.start()
         _frames(oak_driver, 2)

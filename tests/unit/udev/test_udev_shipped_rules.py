@@ -83,6 +83,7 @@ def test_classify_file_starts_with_openocd_style_guards() -> None:
         ("1a86", "7523"),
         ("1209", "0001"),
         ("03e7", None),
+        ("05c6", "901d"),
     ],
 )
 def test_each_adapter_is_tagged_and_hidden_from_modemmanager(vid: str, pid: str | None) -> None:
@@ -99,6 +100,16 @@ def test_each_adapter_is_tagged_and_hidden_from_modemmanager(vid: str, pid: str 
         assert env == {"ID_SPOTLAB": "1", "ID_MM_DEVICE_IGNORE": "1"}
         return
     pytest.fail(f"no rule tags {vid}:{pid}")
+
+
+def test_qualcomm_is_tagged_only_for_the_oak4() -> None:
+    # Vendor 05c6 is Qualcomm's: phones and modems must not be tagged with the OAK4.
+    for rule in _classify().rules:
+        vendors = [a.value for a in rule.get("ATTRS") if a.attr == "idVendor"]
+        if vendors == ["05c6"]:
+            products = [a.value for a in rule.get("ATTRS") if a.attr == "idProduct"]
+            assert products == ["901d"]
+            assert ("SUBSYSTEM", "usb") in {(a.key, a.value) for a in rule.assignments}
 
 
 def test_ftdi_latency_timer_is_1ms() -> None:

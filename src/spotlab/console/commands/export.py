@@ -50,6 +50,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--trc", type=Path, metavar="OUT", help="write marker trajectories as TRC")
     p.add_argument("--calibration", type=Path, help="rig (TOML) to reconstruct a recording")
     p.add_argument(
+        "--drop-group",
+        action="append",
+        default=[],
+        metavar="GROUP",
+        help="leave this C3D parameter group out of --c3d OUT (e.g. FORCE_PLATFORM; every "
+        "group the input C3D file has is kept otherwise); repeat",
+    )
+    p.add_argument(
         "--timestamps",
         type=Path,
         metavar="OUT.csv",
@@ -166,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
         known = ", ".join([*TRIAL_READERS, *OBSERVATION_SUFFIXES])
         raise CommandError(f"{path}: unknown input format {suffix!r} ({known})")
     for out in outputs:
-        write_trial(out, trial)
+        write_trial(out, trial, drop_groups=args.drop_group)
     if args.json:
         print(json.dumps({**summary, "outputs": [str(p) for p in outputs]}))
     elif "method" in summary:

@@ -8,7 +8,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-import spotlab.simulators  # noqa: F401  (registers the sim:// URL scheme with pyserial)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.console.blob_trajectories import MODEL_KEY, model_metadata

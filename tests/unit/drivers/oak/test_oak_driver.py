@@ -15,6 +15,7 @@ from spotlab.drivers.oak import (
     FLAG_OFFLINE,
     CameraSettings,
     OakDriver,
+    OakInUseError,
     OakRecordDecoder,
     UsbPermissionError,
 )
@@ -101,12 +102,27 @@ def test_record_decoder_resyncs_after_damage_and_counts_it() -> None:
     assert decoder.stats.crc_errors == 1 and decoder.stats.lost_frames == 0
 
 
-def test_found_devices_are_checked_by_mxid_and_permission() -> None:
+def test_found_devices_are_checked_by_mxid_permission_and_owner() -> None:
     with pytest.raises(DeviceNotFound, match=r"MxId 14442C1.*seen: none.*udev"):
         _check_found("14442C1", [])
-    with pytest.raises(UsbPermissionError, match=r"61-spotlab-uaccess\.rules"):
-        _check_found("14442C1", [("14442C1", "X_LINK_UNBOOTED", "X_LINK_INSUFFICIENT_PERMISSIONS")])
-    _check_found("14442C1", [("14442C1", "X_LINK_UNBOOTED", "X_LINK_SUCCESS")])
+    denied = ("", "1.3", "X_LINK_UNBOOTED", "X_LINK_INSUFFICIENT_PERMISSIONS")
+    # XLink cannot read the MxId of a board it may not open: any such board is the hint.
+    with pytest.raises(UsbPermissionError, match=r"USB 1\.3.*spotlab udev install"):
+        _check_found("14442C1", [denied])
+    with pytest.raises(OakInUseError, match="in use by another process"):
+        _check_found("14442C1", [("14442C1", "1.3", "X_LINK_BOOTED", "X_LINK_SUCCESS")])
+    _check_found("14442C1", [("14442C1", "1.3", "X_LINK_UNBOOTED", "X_LINK_SUCCESS")])
+
+
+def test_the_driver_restarts_after_stop() -> None:
+    driver, board = _driver(n_frames=50)
+    with driver:
+        _take(driver, 2)
+        driver.stop()
+        assert not board.started
+        driver.start()
+        _take(driver, 2)
+    assert board.starts == 2
 
 
 def test_depthai_without_a_device_gives_the_clear_error_quickly() -> None:
