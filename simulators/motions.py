@@ -173,10 +173,12 @@ class WandDance(Motion):
         walk: float = 1100.0,
         reach: float = 500.0,
         extent_z: float = 700.0,
+        radius: float = 1600.0,
         seed: int = 0,
     ) -> None:
         rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3A4D]))
         self.length = float(length)
+        self.radius = float(radius)
         self.centre = np.asarray(centre, dtype=np.float64)
         self._amp = np.array([walk, walk, reach, reach, extent_z])
         self._freq = np.concatenate(
@@ -191,9 +193,13 @@ class WandDance(Motion):
     def sample(self, times: F64, markers: I64) -> F64:
         t = np.asarray(times, dtype=np.float64)
         wave = self._amp * np.sin(2 * np.pi * self._freq * t[:, None] + self._phase)
-        c = self.centre + np.stack(
-            [wave[:, 0] + wave[:, 2], wave[:, 1] + wave[:, 3], wave[:, 4]], axis=1
-        )
+        xy = np.stack([wave[:, 0] + wave[:, 2], wave[:, 1] + wave[:, 3]], axis=1)
+        # The operator keeps inside a circle of radius ``radius``, as the floor space
+        # between the cameras allows (soft limit: smooth, never beyond it).
+        r = np.linalg.norm(xy, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xy = np.where(r > 0, xy * (self.radius * np.tanh(r / self.radius) / r), xy)
+        c = self.centre + np.column_stack([xy, wave[:, 4]])
         yaw = self._yaw_rate * t + 0.5 * np.sin(0.31 * t)
         pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t + self._tilt[1])
         d = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
