@@ -94,7 +94,8 @@ class LensChoice:
         Terms fitted, in :data:`ALL_TERMS` order.
     edge_sd : float
         Largest SD of the modelled distortion over the image, in units of the
-        image-point noise (0 for no terms; inf where the terms are not determined).
+        image-point noise (0 for no terms; inf where the terms are not determined; NaN
+        for a set taken after the lens check, not estimated).
     reason : str
         One sentence: why these and not more.
     limited_by : str
@@ -386,7 +387,7 @@ def next_step(
     )
     return LensChoice(
         step,
-        choice.edge_sd,
+        float("nan"),  # not estimated for a step taken after the fit
         f"{change}: with {', '.join(choice.terms)} the lens model could not be inverted over "
         f"the whole image ({problems[0]})",
         "inversion",
