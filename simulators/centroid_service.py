@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
 from spotlab.simulators.blobs import BlobModel
@@ -164,10 +164,13 @@ class CentroidSimOptions:
 
 #: Scenes of the centroid simulator.
 CENTROID_MOTIONS = (*BODY_MOTIONS, "wand", "lframe")
-#: Where the wand's centre goes: (centre, half-size) of the volume, mm. The wand is
-#: waved 2.5 times as fast as the PSD simulator's (``tempo``): a few seconds cover the
-#: volume and most of every camera's image.
-WAND_VOLUME = ((0.0, 0.0, 1100.0), (1500.0, 1500.0, 900.0))
+#: Where the wand goes (:class:`WandDance`, mm): the operator walks a 3 x 3 m area and
+#: sweeps the wand from 0.2 to 2 m high. The wand is waved 2.5 times as fast as the PSD
+#: simulator's (``tempo``): a few seconds cover the volume and most of every camera's image.
+WAND_VOLUME: dict[str, Any] = {
+    "centre": (0.0, 0.0, 1100.0), "walk": 1000.0, "reach": 500.0, "extent_z": 900.0,
+    "radius": 1500.0,
+}  # fmt: skip
 WAND_TEMPO = 2.5
 #: A 3-marker wand's middle marker, from end A, in wand lengths (off-centre: the
 #: ends are told apart).
@@ -179,9 +182,8 @@ LFRAME_MARKERS = 4
 def centroid_motion(options: CentroidSimOptions) -> Motion | None:
     """The scene of ``options.motion`` (None: the walking body of :class:`CentroidDevice`)."""
     if options.motion == "wand":
-        centre, extent = WAND_VOLUME
         return WandDance(
-            options.wand_length_mm, centre, extent, seed=options.seed, tempo=WAND_TEMPO,
+            options.wand_length_mm, **WAND_VOLUME, seed=options.seed, tempo=WAND_TEMPO,
             middle_mm=WAND_MIDDLE * options.wand_length_mm if options.markers == 3 else None,
         )  # fmt: skip
     if options.motion == "lframe":

@@ -156,22 +156,28 @@ class Delayed(Motion):
 
 
 class WandDance(Motion):
-    """Two or three markers on a wand ``length`` mm long waved through the volume.
+    """Two or three markers on a wand waved through the volume as an operator does.
 
-    The wand centre follows a sum of slow sines inside ``centre +- extent``;
-    the wand turns about the vertical and tilts up and down, so that it covers
-    many directions. Marker 0 and 1 are the wand ends (``WAND_A``, ``WAND_B``);
-    with ``middle_mm``, marker 2 (``WAND_M``) sits on the wand ``middle_mm`` from
-    end A, as on a passive three-marker wand.
+    The operator walks slowly through the capture volume (a Lissajous path of
+    ``walk`` mm amplitude, 0.05-0.09 Hz) while sweeping the wand with the arm, quickly
+    (``reach`` mm sideways at 0.35-0.55 Hz) and from near the floor to above the head
+    (``centre[2] +- extent_z``, 0.18-0.28 Hz), turning and tilting it so that it
+    points in many directions. In 20 s the wand sweeps most of the volume the cameras
+    look at. Marker 0 and 1 are the wand ends (``WAND_A``, ``WAND_B``, ``length`` mm
+    apart); with ``middle_mm``, marker 2 (``WAND_M``) sits on the wand ``middle_mm``
+    from end A, as on a passive three-marker wand.
 
     Parameters
     ----------
     length : float
         Distance between the ends (mm).
-    centre, extent : tuple of 3 floats
-        Middle of the volume the wand centre sweeps and its half-size (mm).
+    centre : tuple of 3 floats
+        Middle of the volume (mm).
+    walk, reach, extent_z, radius : float
+        The operator's path amplitude, the arm's sideways sweep, the wand's height
+        sweep, and the circle the operator stays in (mm).
     seed : int
-        Seed of the sines' frequencies and phases.
+        Seed of the frequencies and phases.
     middle_mm : float, optional
         Distance of a third, middle marker from end A (mm), ``0 < middle_mm < length``.
     tempo : float
@@ -183,17 +189,23 @@ class WandDance(Motion):
         self,
         length: float = 500.0,
         centre: tuple[float, float, float] = (0.0, 0.0, 1000.0),
-        extent: tuple[float, float, float] = (800.0, 800.0, 450.0),
+        walk: float = 1100.0,
+        reach: float = 500.0,
+        extent_z: float = 700.0,
+        radius: float = 1600.0,
         seed: int = 0,
         middle_mm: float | None = None,
         tempo: float = 1.0,
     ) -> None:
         rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3A4D]))
         self.length = float(length)
+        self.radius = float(radius)
         self.centre = np.asarray(centre, dtype=np.float64)
-        self.extent = np.asarray(extent, dtype=np.float64)
-        self._freq = rng.uniform(0.06, 0.25, size=(2, 3))  # Hz, two sines per axis
-        self._phase = rng.uniform(0, 2 * np.pi, size=(2, 3))
+        self._amp = np.array([walk, walk, reach, reach, extent_z])
+        self._freq = np.concatenate(
+            [rng.uniform(0.05, 0.09, 2), rng.uniform(0.35, 0.55, 2), rng.uniform(0.18, 0.28, 1)]
+        )  # Hz: walk x, y; arm x, y; arm up and down
+        self._phase = rng.uniform(0, 2 * np.pi, size=5)
         self._yaw_rate = rng.uniform(0.5, 0.9) * rng.choice([-1.0, 1.0])  # rad/s
         self._tilt = (rng.uniform(0.2, 0.4), rng.uniform(0, 2 * np.pi))  # Hz, phase
         if middle_mm is not None and not 0.0 < middle_mm < self.length:
@@ -207,12 +219,17 @@ class WandDance(Motion):
         self.labels = ("WAND_A", "WAND_B", "WAND_M")[: self.n_markers]
 
     def sample(self, times: F64, markers: I64) -> F64:
-        t = self.tempo * np.asarray(times, dtype=np.float64)[:, None]
-        w = 2 * np.pi * self._freq
-        wave = 0.6 * np.sin(w[0] * t + self._phase[0]) + 0.4 * np.sin(w[1] * t + self._phase[1])
-        c = self.centre + self.extent * wave
-        yaw = self._yaw_rate * t[:, 0] + 0.5 * np.sin(0.31 * t[:, 0])
-        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t[:, 0] + self._tilt[1])
+        t = self.tempo * np.asarray(times, dtype=np.float64)
+        wave = self._amp * np.sin(2 * np.pi * self._freq * t[:, None] + self._phase)
+        xy = np.stack([wave[:, 0] + wave[:, 2], wave[:, 1] + wave[:, 3]], axis=1)
+        # The operator keeps inside a circle of radius ``radius``, as the floor space
+        # between the cameras allows (soft limit: smooth, never beyond it).
+        r = np.linalg.norm(xy, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xy = np.where(r > 0, xy * (self.radius * np.tanh(r / self.radius) / r), xy)
+        c = self.centre + np.column_stack([xy, wave[:, 4]])
+        yaw = self._yaw_rate * t + 0.5 * np.sin(0.31 * t)
+        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t + self._tilt[1])
         d = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
         along = self._along[np.asarray(markers, dtype=np.int64)][:, None]
         return np.asarray(c + along * self.length * d)
@@ -493,3 +510,30 @@ def make_motion(name: str | Path, n_markers: int, seed: int = 0) -> Motion:
     if base.n_markers >= n_markers:
         return base if base.n_markers == n_markers else Subset(base, n_markers)
     return Concat([base, reference_markers(n_markers - base.n_markers, seed)])
+
+
+def static_points(motion: Motion) -> list[tuple[int, str, F64]]:
+    """The static markers of a motion with their known coordinates.
+
+    Parameters
+    ----------
+    motion : Motion
+        As :func:`make_motion` builds it.
+
+    Returns
+    -------
+    list of (int, str, ndarray)
+        Marker index (0-based, the LED id), label and position (3,) in mm, for every
+        marker that stands still (the L-frame and the other reference markers), in
+        marker order. Empty when the motion has none.
+    """
+    if isinstance(motion, StaticMarkers):
+        return [(i, motion.labels[i], motion.points[i]) for i in range(motion.n_markers)]
+    if isinstance(motion, Concat):
+        out = []
+        for start, part in zip(motion._starts, motion.parts, strict=False):
+            out += [(int(start) + i, lab, p) for i, lab, p in static_points(part)]
+        return out
+    if isinstance(motion, Subset):
+        return [item for item in static_points(motion.motion) if item[0] < motion.n_markers]
+    return []

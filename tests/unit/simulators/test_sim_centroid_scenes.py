@@ -91,7 +91,10 @@ def test_bad_scene_options_are_refused(query: str, message: str) -> None:
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--motion", "gait"], "--motion 'gait': the centroid simulator plays walk, static, rom, wand, lframe"),
+        (
+            ["--motion", "gait"],
+            "--motion 'gait': the centroid simulator plays walk, static, rom, wand, lframe",
+        ),
         (["--motion", "wand", "--markers", "5"], "markers must be 2 to 3 for the wand motion"),
         (["--motion", "wand", "--model-out", "m.json"], "--model-out"),
         (["--motion", "wand", "--wand-length", "10"], "wand length must be 50 to 3000 mm"),

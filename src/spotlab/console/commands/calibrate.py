@@ -86,7 +86,20 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--frame-points", type=Path, help="CSV with X, Y, Z (mm) per frame marker")
     p.add_argument("--report", type=Path, help="quality report (JSON); default OUT.report.json")
     p.add_argument("--figure", type=Path, help="quality figure (PNG); default OUT.report.png")
-    p.add_argument("--no-distortion", action="store_true", help="fit no lens distortion")
+    p.add_argument(
+        "--distortion",
+        choices=("auto", "none", "radial", "full"),
+        default="auto",
+        help="lens terms to fit: auto (default; per camera what the wand's coverage of the "
+        "image determines), none, radial (k1, k2) or full (k1, k2, p1, p2, k3)",
+    )
+    p.add_argument(
+        "--no-distortion",
+        dest="distortion",
+        action="store_const",
+        const="none",
+        help="fit no lens distortion (same as --distortion none)",
+    )
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.set_defaults(run=run)
 
@@ -208,10 +221,9 @@ def run(args: argparse.Namespace) -> int:
         if verbose:
             print(f"calibrate: {message}", file=sys.stderr, flush=True)
 
-    distortion = () if args.no_distortion else ("k1", "k2", "p1", "p2", "k3")
     result = wand_calibrate(
         obs.wand, length, obs.frame, obs.frame_points, obs.image_size, names=obs.names,
-        distortion=distortion, progress=progress,
+        distortion=args.distortion, units=obs.units, progress=progress,
     )  # fmt: skip
     if found is not None and found.markers == 2:
         # Two identical markers: name the ends again with this first rig, then adjust again.
@@ -220,28 +232,43 @@ def run(args: argparse.Namespace) -> int:
         obs = found.observations
         result = wand_calibrate(
             obs.wand, length, obs.frame, obs.frame_points, obs.image_size, names=obs.names,
-            distortion=distortion, progress=progress,
+            distortion=args.distortion, units=obs.units, progress=progress,
         )  # fmt: skip
     if found is not None:
         _check_scale(result.rig, obs, length)
-    result.rig.save(out)
     extra = {"finder": found.summary()} if found is not None else {}
-    report_path.write_text(json.dumps({**result.report, **extra}, indent=2) + "\n")
+    # The figure first: it is the output most likely to fail (matplotlib), and a rig
+    # is written only with its report.
     write_report_figure(
-        result.rig, obs.wand, result.wand_residuals, result.inliers, result.report, figure_path
+        result.rig,
+        obs.wand,
+        result.wand_residuals,
+        result.inliers,
+        result.report,
+        figure_path,
+        frame_points=obs.frame_points,
     )
+    report_path.write_text(json.dumps({**result.report, **extra}, indent=2) + "\n")
+    result.rig.save(out)
     if args.json:
         print(json.dumps({**result.report, **extra, "calibration": str(out)}))
         return 0
     if found is not None:
         _print_finder(found)
     rep = result.report
+    units = rep["image_units"]
     for cam in rep["cameras"]:
+        lens = cam["distortion"]
         print(
-            f"  {cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3f} px, "
+            f"  {cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3f} {units}, "
             f"{cam['observations']} points ({cam['rejected']} rejected), "
-            f"image covered {100 * cam['image_coverage']:.0f} %"
+            f"image covered {100 * cam['image_coverage']:.0f} %, "
+            f"lens terms {', '.join(lens['fitted']) or 'none'} ({lens['mode']})"
         )
+        if lens["limited_by"] not in ("", "chosen"):
+            print(f"      {lens['reason']}")
+        if lens["advice"]:
+            print(f"      to do: {lens['advice']}")
     w = rep["wand"]
     print(
         f"  wand: {w['frames']} frames, length {w['mean_mm']:.3f} mm (nominal "

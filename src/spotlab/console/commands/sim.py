@@ -22,7 +22,7 @@ from spotlab.simulators.centroid_service import (
 )
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import lab_dir
-from spotlab.simulators.motions import MOTIONS, from_c3d
+from spotlab.simulators.motions import MOTIONS, from_c3d, make_motion, static_points
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -116,6 +116,15 @@ def add_parser(sub: Any) -> None:
         help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
     )
     p.add_argument(
+        "--frame-points-out",
+        type=Path,
+        metavar="POINTS.csv",
+        help="write the reference object's published coordinates (mm) as CSV, the "
+        "--frame-points table of spotlab calibrate: selspot: the motion's static markers "
+        "(the L-frame first), columns marker (LED number, 1-based), X, Y, Z; centroid: the "
+        "L-frame's markers, columns X, Y, Z",
+    )
+    p.add_argument(
         "--ring-phase",
         type=float,
         default=0.0,
@@ -160,11 +169,6 @@ def add_parser(sub: Any) -> None:
         "--wand-length", type=float, default=500.0, metavar="MM",
         help="wand: distance between its end markers (default 500 mm); a 3-marker wand's "
         "middle marker sits 0.4 of it from end A",
-    )  # fmt: skip
-    cen.add_argument(
-        "--frame-points-out", type=Path, metavar="P.csv",
-        help="write the L-frame's published marker coordinates (X,Y,Z mm per marker) for "
-        "spotlab calibrate --frame-points",
     )  # fmt: skip
     cen.add_argument(
         "--ghosts", type=float, default=0.02, metavar="RATE",
@@ -224,6 +228,22 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         lab_name=getattr(args, "lab_name", None) or "selspot",
         lab=getattr(args, "lab", None),
     )
+
+
+def _write_frame_points(path: Path, options: service.SelspotSimOptions) -> None:
+    """The static markers' coordinates of the simulated motion, for ``spotlab calibrate``."""
+    check_output_paths([("--frame-points-out", path)])
+    try:
+        points = static_points(make_motion(options.motion, options.leds, options.seed))
+    except (OSError, ValueError) as exc:
+        raise CommandError(f"--motion {options.motion}: {exc}") from None
+    if not points:
+        raise CommandError(
+            f"--frame-points-out: --motion {options.motion} with --leds {options.leds} has no "
+            "static markers (use --motion lframe, or more LEDs than the motion moves)"
+        )
+    rows = [f"{i + 1},{x:g},{y:g},{z:g}\n" for i, _label, (x, y, z) in points]
+    path.write_text("marker,X,Y,Z\n" + "".join(rows))
 
 
 def clock_steps_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
@@ -362,6 +382,8 @@ def run(args: argparse.Namespace) -> int:
     if args.input:
         raise CommandError("--input wires timer inputs; selspot systems have none")
     options = options_from_args(args)
+    if args.frame_points_out is not None:
+        _write_frame_points(args.frame_points_out, options)
     server = (
         service.serve_tcp(options, port=args.tcp)
         if args.tcp is not None
