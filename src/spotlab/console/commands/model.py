@@ -35,7 +35,7 @@ from spotlab.reconstruction.identification import MarkerModel, model_fit
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "model",
-        help="learn, show or check a marker model for identification",
+        help="learn, show, check or init a marker model for identification",
         description="Marker models (rigid clusters and distance links) for labelling markers.",
     )
     actions = p.add_subparsers(dest="action", metavar="ACTION", help="learn, show, check or init")
