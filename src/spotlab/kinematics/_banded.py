@@ -164,7 +164,7 @@ def _companion_step(
 
 
 class _BlockLayout:
-    """Samples ``i = b * length + j`` laid out as (length, blocks) arrays, blocks contiguous."""
+    """Samples ``i = b * length + j`` as (length, ..., blocks) arrays, blocks contiguous."""
 
     def __init__(self, n: int) -> None:
         self.n = n
@@ -173,25 +173,23 @@ class _BlockLayout:
         self.total = self.blocks * self.length
 
     def arrange(self, values: FloatArray, out: FloatArray) -> FloatArray:
-        """``values`` (n,) into ``out`` (length, blocks), zero past the end."""
-        by_block = out.T  # (blocks, length), a view
-        full, rest = divmod(values.size, self.length)
-        by_block[:full] = values[: full * self.length].reshape(full, self.length)
-        if full < self.blocks:
-            by_block[full, :rest] = values[full * self.length :]
-            by_block[full, rest:] = 0.0
-            by_block[full + 1 :] = 0.0
+        """``values`` (..., n) into ``out`` (length, ..., blocks), zero past the end."""
+        padded = np.zeros((*values.shape[:-1], self.total))
+        padded[..., : values.shape[-1]] = values
+        by_block = padded.reshape(*values.shape[:-1], self.blocks, self.length)
+        out[...] = np.moveaxis(by_block, -1, 0)
         return out
 
 
 def _takahashi(
     chol: FloatArray, layout: _BlockLayout, coupling: FloatArray, source: FloatArray
 ) -> Iterator[tuple[int, FloatArray, list[FloatArray]]]:
-    """Steps of Takahashi's recursion for all blocks at once, last sample first.
+    """Steps of Takahashi's recursion for all blocks (and factors) at once, last sample first.
 
-    Yields ``(j, corner, y)`` per step j of every block: ``corner`` (blocks,) is
+    ``chol`` is one upper banded factor (bw + 1, n) or a stack (C, bw + 1, n).
+    Yields ``(j, corner, y)`` per step j of every block: ``corner`` (C, blocks) is
     ``inv(A)[i, i]`` and ``-y[k - 1]`` is ``inv(A)[i, i + k]`` for ``i = b * length + j``.
-    ``coupling`` (bw, length, blocks) and ``source`` (length, blocks) are work arrays.
+    ``coupling`` (bw, length, C, blocks) and ``source`` (length, C, blocks) are work arrays.
 
     Notes
     -----
@@ -201,22 +199,23 @@ def _takahashi(
     companion matrix of row i of U, O(n bw^2) in all. The maps compose, so
     the n steps run as blocks side by side: compose each block's map, chain
     the block maps, then run all blocks from their known ends together. The
-    windows are held entry by entry (arrays over blocks), so each step is a
-    few dozen vector operations.
+    windows are held entry by entry (arrays over factors and blocks), so each
+    step is a few dozen vector operations whatever the number of factors.
     """
-    bw = chol.shape[0] - 1
-    n = chol.shape[1]
+    stack = chol if chol.ndim == 3 else chol[None]
+    count, bands, n = stack.shape
+    bw = bands - 1
     blocks, length = layout.blocks, layout.length
-    diag = chol[bw]
+    diag = stack[:, bw]
     # past the end: no coupling and no source, so the window stays zero
     for d in range(1, bw + 1):
-        row = np.zeros(n)
-        np.divide(chol[bw - d, d:], diag[: n - d], out=row[: n - d])
+        row = np.zeros((count, n))
+        np.divide(stack[:, bw - d, d:], diag[:, : n - d], out=row[:, : n - d])
         layout.arrange(row, coupling[d - 1])
     layout.arrange(1.0 / diag**2, source)
-    zero = np.zeros(blocks)
+    zero = np.zeros((count, blocks))
     # 1. each block's map X -> phi X phi^T + psi
-    phi = [[np.full(blocks, float(a == b)) for b in range(bw)] for a in range(bw)]
+    phi = [[np.full((count, blocks), float(a == b)) for b in range(bw)] for a in range(bw)]
     psi = [[zero] * bw for _ in range(bw)]
     for j in range(length - 1, -1, -1):
         c = [coupling[k, j] for k in range(bw)]
@@ -228,16 +227,17 @@ def _takahashi(
             top.append(-acc)
         phi = [top, *phi[:-1]]
         psi, _, _ = _companion_step(psi, c, source[j])
-    phi_b: FloatArray = np.moveaxis(np.array(phi), 2, 0)
-    psi_b: FloatArray = np.moveaxis(np.array(psi), 2, 0)
+    # (C, blocks, bw, bw)
+    phi_b: FloatArray = np.moveaxis(np.array(phi), (2, 3), (0, 1))
+    psi_b: FloatArray = np.moveaxis(np.array(psi), (2, 3), (0, 1))
     # 2. the window at the end of each block
-    ends = np.zeros((blocks, bw, bw))
-    x = np.zeros((bw, bw))
+    ends = np.zeros((count, blocks, bw, bw))
+    x = np.zeros((count, bw, bw))
     for b in range(blocks - 1, -1, -1):
-        ends[b] = x
-        x = phi_b[b] @ x @ phi_b[b].T + psi_b[b]
+        ends[:, b] = x
+        x = phi_b[:, b] @ x @ np.swapaxes(phi_b[:, b], 1, 2) + psi_b[:, b]
     # 3. all blocks from their ends at once
-    window = [[np.ascontiguousarray(ends[:, a, b]) for b in range(bw)] for a in range(bw)]
+    window = [[np.ascontiguousarray(ends[:, :, a, b]) for b in range(bw)] for a in range(bw)]
     for j in range(length - 1, -1, -1):
         window, corner, y = _companion_step(window, [coupling[k, j] for k in range(bw)], source[j])
         yield j, corner, y
@@ -255,8 +255,11 @@ class InverseTrace:
     -----
     Only the band of ``inv(A)`` enters the trace, and its entries are summed as
     Takahashi's recursion (:func:`_takahashi`) produces them, block-major, so no
-    band of the inverse is ever stored. The work arrays are kept between calls:
-    a smoothing-parameter search evaluates the trace many times at one size.
+    band of the inverse is ever stored. Several factors of the same size (one
+    matrix at several smoothing parameters) run side by side in one recursion,
+    so its per-step cost in Python is paid once for all of them. The work arrays
+    are kept between calls: a smoothing-parameter search evaluates the trace
+    many times at one size.
     """
 
     def __init__(self, r: FloatArray) -> None:
@@ -270,15 +273,26 @@ class InverseTrace:
             row = np.zeros(n)
             row[: n - d] = r[bw - d, d:] * (1.0 if d == 0 else 2.0)
             self.layout.arrange(row, self.r[d])
-        self.coupling = np.empty((bw, *shape))
-        self.source = np.empty(shape)
+        self._bw = bw
+        self._work: dict[int, tuple[FloatArray, FloatArray]] = {}
+
+    def _arrays(self, count: int) -> tuple[FloatArray, FloatArray]:
+        if count not in self._work:
+            shape = (self.layout.length, count, self.layout.blocks)
+            self._work = {count: (np.empty((self._bw, *shape)), np.empty(shape))}
+        return self._work[count]
 
     def __call__(self, chol: FloatArray) -> float:
         """The trace, for the upper banded Cholesky factor ``chol`` (bw + 1, n) of A."""
-        bw = chol.shape[0] - 1
-        acc = np.zeros(self.layout.blocks)
-        for j, corner, y in _takahashi(chol, self.layout, self.coupling, self.source):
+        return float(self.many(chol[None])[0])
+
+    def many(self, chol: FloatArray) -> FloatArray:
+        """The traces, shape (C,), for a stack of upper banded factors ``chol`` (C, bw + 1, n)."""
+        bw = chol.shape[1] - 1
+        coupling, source = self._arrays(chol.shape[0])
+        acc = np.zeros((chol.shape[0], self.layout.blocks))
+        for j, corner, y in _takahashi(chol, self.layout, coupling, source):
             acc += corner * self.r[0, j]
             for k in range(1, bw + 1):
                 acc -= y[k - 1] * self.r[k, j]
-        return float(acc.sum())
+        return np.asarray(acc.sum(axis=1), dtype=np.float64)

@@ -1,0 +1,281 @@
+"""GCV searches of many channels that share their sample times and weights, batched.
+
+The channels of one :class:`~spotlab.kinematics.gcv.PenalisedSpline` share the
+banded matrix ``R + p (m!)^2 Q^T W^-1 Q`` and hence, at one p, its Cholesky factor
+and the trace of the hat matrix; only the right-hand sides differ. The search
+is the one :func:`~spotlab.kinematics.gcv.gcv_fit` runs on each channel (a scan
+over ``log10 p``, then bounded Brent refinement), with the same evaluations in
+the same order, so the results are the per-channel ones to rounding:
+
+* the scan evaluates every channel at each grid point with one factorisation,
+  one multi-right-hand-side solve and one trace, the traces of all grid points
+  in one recursion;
+* the refinements, whose points differ from channel to channel, run in
+  lockstep: each channel's :func:`scipy.optimize.minimize_scalar` runs in its own
+  thread and waits for its criterion value, and each round factors the
+  channels' matrices and computes all their traces in one recursion.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, optimize
+from scipy.linalg import lapack
+
+from spotlab.kinematics import _banded
+from spotlab.kinematics.gcv import LONG_RECORD, FitStatistics, PenalisedSpline, gcv_fit
+
+FloatArray = NDArray[np.float64]
+
+
+def _criterion(rss: FloatArray, rdof: FloatArray, n: int) -> FloatArray:
+    """GCV from ``sum(w r^2)`` and ``n - dof``, with the per-channel search's operations."""
+    rss = (rss / n) * n  # the per-channel search goes through the mean
+    rdof = n - (n - rdof)  # and through dof
+    with np.errstate(divide="ignore", invalid="ignore"):
+        value = (rss / n) / (rdof / n) ** 2
+    return np.where(rdof < n * 1e-9, np.inf, value)
+
+
+def _rdof(problem: PenalisedSpline, chols: list[FloatArray]) -> FloatArray:
+    """``n - dof`` for each factor, floored as :meth:`PenalisedSpline.statistics` floors it."""
+    traces = problem.traces(np.stack(chols))
+    return np.maximum(problem.r.shape[1] - traces, np.finfo(float).tiny)
+
+
+def _fits(
+    problem: PenalisedSpline, p: float, chol: FloatArray, y: FloatArray, rhs: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Fitted values (N, K) and ``sum(w r^2)`` (K,) for the columns of y at one factor."""
+    delta, info = lapack.dpbtrs(chol, rhs, lower=0)
+    if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
+        raise linalg.LinAlgError(f"banded solve failed (info {info})")
+    fitted = y - (p * problem.factorial2) * problem.winv[:, None] * _banded.q_times(
+        problem.q, delta
+    )
+    rss = (problem.w[:, None] * (y - fitted) ** 2).sum(axis=0)
+    return fitted, rss
+
+
+class _Channels:
+    """Criterion evaluations of many channels; remembers each channel's best fit."""
+
+    def __init__(self, problem: PenalisedSpline, y: FloatArray) -> None:
+        self.problem = problem
+        self.y = y
+        self.rhs = _banded.qt_times(problem.q, y)
+        k = y.shape[1]
+        self.best_value = np.full(k, np.inf)
+        self.best_log_p = np.full(k, np.nan)
+        self.best_fit = np.zeros_like(y)
+        self.best_rss = np.zeros(k)
+        self.best_rdof = np.zeros(k)
+
+    def _keep(
+        self,
+        cols: FloatArray,
+        values: FloatArray,
+        log_p: float,
+        fit: FloatArray,
+        rss: FloatArray,
+        rdof: float,
+    ) -> None:
+        """Remember the fits of channels ``cols`` (fit (N, len(cols))) that beat their best."""
+        better = values < self.best_value[cols]
+        if np.any(better):
+            chosen = cols[better]
+            self.best_value[chosen], self.best_log_p[chosen] = values[better], log_p
+            self.best_fit[:, chosen] = fit[:, better]
+            self.best_rss[chosen], self.best_rdof[chosen] = rss[better], rdof
+
+    def scan(self, grid: FloatArray) -> FloatArray:
+        """Criterion of every channel at every grid point, shape (G, K)."""
+        problem, n = self.problem, self.problem.n_eff
+        values = np.full((grid.size, self.y.shape[1]), np.inf)
+        chols, rows, fits = [], [], []
+        for g, log_p in enumerate(grid):
+            p = 10.0 ** float(log_p)
+            try:
+                chol = np.array(problem.factor(p))
+            except linalg.LinAlgError:
+                continue
+            chols.append(chol)
+            rows.append(g)
+            fits.append(_fits(problem, p, chol, self.y, self.rhs))
+        if not chols:
+            return values
+        everyone = np.arange(self.y.shape[1])
+        for g, r, (fitted, rss) in zip(rows, _rdof(problem, chols), fits, strict=True):
+            values[g] = _criterion(rss, np.full(rss.shape, r), n)
+            self._keep(everyone, values[g], float(grid[g]), fitted, rss, float(r))
+        return values
+
+    def evaluate(self, points: dict[int, float]) -> dict[int, float]:
+        """Criterion of channel k at ``log10 p = points[k]``, each at its own p."""
+        problem, n = self.problem, self.problem.n_eff
+        out = dict.fromkeys(points, float(np.inf))
+        chols, done = [], []
+        for k, log_p in points.items():
+            p = 10.0**log_p
+            try:
+                chol = np.array(problem.factor(p))
+            except linalg.LinAlgError:
+                continue
+            fitted, rss = _fits(problem, p, chol, self.y[:, k : k + 1], self.rhs[:, k : k + 1])
+            chols.append(chol)
+            done.append((k, log_p, fitted[:, 0], float(rss[0])))
+        if chols:
+            for (k, log_p, fitted, rss), r in zip(done, _rdof(problem, chols), strict=True):
+                value = _criterion(np.array([rss]), np.array([r]), n)
+                out[k] = float(value[0])
+                self._keep(np.array([k]), value, log_p, fitted[:, None], np.array([rss]), float(r))
+        return out
+
+
+def _lockstep(
+    tasks: dict[int, Callable[[Callable[[float], float]], float]],
+    evaluate: Callable[[dict[int, float]], dict[int, float]],
+) -> dict[int, float]:
+    """Run ``tasks[k](criterion)`` side by side, evaluating their criteria in batches.
+
+    Each task runs in its own thread and calls its criterion with one point at a
+    time; a round starts when every unfinished task waits for a value, and
+    evaluates all their points in one call to ``evaluate``.
+    """
+    cond = threading.Condition()
+    pending: dict[int, float] = {}
+    answers: dict[int, float] = {}
+    active = set(tasks)
+    results: dict[int, float] = {}
+    errors: list[BaseException] = []
+
+    def criterion_of(k: int) -> Callable[[float], float]:
+        def criterion(log_p: float) -> float:
+            with cond:
+                pending[k] = float(log_p)
+                cond.notify_all()
+                while k not in answers:
+                    cond.wait()
+                return answers.pop(k)
+
+        return criterion
+
+    def run(k: int) -> None:
+        try:
+            results[k] = tasks[k](criterion_of(k))
+        except BaseException as exc:  # handed to the caller below
+            errors.append(exc)
+        finally:
+            with cond:
+                active.discard(k)
+                cond.notify_all()
+
+    threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in tasks]
+    for thread in threads:
+        thread.start()
+    while True:
+        with cond:
+            while active and len(pending) < len(active):
+                cond.wait()
+            if not active:
+                break
+            batch = dict(pending)
+            pending.clear()
+        try:
+            values = evaluate(batch)
+        except BaseException:
+            values = dict.fromkeys(batch, float(np.nan))
+            raise
+        finally:
+            with cond:
+                answers.update(values)
+                cond.notify_all()
+    for thread in threads:
+        thread.join()
+    if errors:
+        raise errors[0]
+    return results
+
+
+def gcv_fit_many(
+    problem: PenalisedSpline, y: FloatArray, step: float = 2.0, x: FloatArray | None = None
+) -> tuple[FloatArray, FloatArray, list[FitStatistics]]:
+    """Smoothing parameters minimising GCV for every channel of y (N, K), with their fits.
+
+    Returns p (K,), the fitted values (N, K) and the figures of each channel's
+    fit. The search of each channel is :func:`~spotlab.kinematics.gcv.gcv_fit`'s;
+    records longer than :data:`~spotlab.kinematics.gcv.LONG_RECORD` (given ``x``)
+    are searched channel by channel, as there.
+    """
+    k_all = y.shape[1]
+    if x is not None and problem.n_eff > LONG_RECORD:
+        ps, cols, stats = [], [], []
+        for k in range(k_all):
+            pk, fitted, st = gcv_fit(problem, y[:, k : k + 1], step, x)
+            ps.append(pk)
+            cols.append(fitted[:, 0])
+            stats.append(st)
+        return np.array(ps), np.stack(cols, axis=1), stats
+    channels = _Channels(problem, y)
+    lo, hi = problem.log_p_range
+    grid = np.arange(lo, hi + step, step)
+    values = channels.scan(grid)
+    log_p = np.full(k_all, float(grid[-1]))
+    tasks: dict[int, Callable[[Callable[[float], float]], float]] = {}
+    for k in range(k_all):
+        if not np.any(np.isfinite(values[:, k])):
+            continue
+        best = int(np.argmin(values[:, k]))
+        a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+        log_p[k] = float(grid[best])
+
+        def refine(
+            criterion: Callable[[float], float],
+            a: float = a,
+            b: float = b,
+            bound: float = values[best, k],
+        ) -> float:
+            res = optimize.minimize_scalar(
+                criterion, bounds=(a, b), method="bounded", options={"xatol": 1e-6}
+            )
+            return float(res.x) if res.fun <= bound else float("nan")
+
+        tasks[k] = refine
+    for k, refined in _lockstep(tasks, channels.evaluate).items():
+        if np.isfinite(refined):
+            log_p[k] = refined
+    return _finish(channels, log_p)
+
+
+def _finish(
+    channels: _Channels, log_p: FloatArray
+) -> tuple[FloatArray, FloatArray, list[FitStatistics]]:
+    """p, fitted values and figures at each channel's chosen ``log10 p``."""
+    problem, n = channels.problem, channels.problem.n_eff
+    fitted = np.array(channels.best_fit)
+    rss, rdof = np.array(channels.best_rss), np.array(channels.best_rdof)
+    redo = [k for k in range(log_p.size) if channels.best_log_p[k] != log_p[k]]
+    if redo:
+        chols = []
+        for k in redo:
+            p = 10.0 ** float(log_p[k])
+            chol = np.array(problem.factor(p))
+            cols, sums = _fits(
+                problem, p, chol, channels.y[:, k : k + 1], channels.rhs[:, k : k + 1]
+            )
+            fitted[:, k], rss[k] = cols[:, 0], sums[0]
+            chols.append(chol)
+        rdof[redo] = _rdof(problem, chols)
+    stats = []
+    for k in range(log_p.size):
+        msr = np.array([rss[k] / n])
+        stats.append(
+            FitStatistics(
+                msr=msr, dof=n - rdof[k], gcv=msr / (rdof[k] / n) ** 2, variance=msr * n / rdof[k]
+            )
+        )
+    return 10.0**log_p, fitted, stats
