@@ -217,7 +217,7 @@ class SmoothingSpline:
     def _natural(x: FloatArray, f: FloatArray, degree: int) -> tuple[FloatArray, FloatArray, int]:
         """Knots, coefficients, degree of the natural spline through (x, f)."""
         m = (degree + 1) // 2
-        ends = [(order, 0.0) for order in range(m, degree)]
+        ends = [(order, np.zeros(f.shape[1:])) for order in range(m, degree)]
         interp = make_interp_spline(x, f, k=degree, bc_type=(ends, ends))
         return interp.t, interp.c, degree
 
