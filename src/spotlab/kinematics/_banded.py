@@ -92,6 +92,10 @@ def _bspline_values(knots: FloatArray, t: FloatArray, degree: int) -> list[Float
     return values
 
 
+#: Sample intervals per chunk of :func:`bspline_gram_band`'s quadrature.
+GRAM_CHUNK = 1 << 16
+
+
 def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     """Gram matrix ``R_jk = integral N_j N_k`` of the order-m B-splines on knots x.
 
@@ -113,24 +117,29 @@ def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     degree = m - 1
     nodes, weights = np.polynomial.legendre.leggauss(m)
     h = np.diff(x)
-    # points of interval i, shape (N - 1, m)
-    points = 0.5 * (x[1:] + x[:-1])[:, None] + 0.5 * h[:, None] * nodes[None, :]
-    qw = 0.5 * h[:, None] * weights[None, :]
     # m - 1 extra knots each side put every sample interval inside the base interval
     pad = np.arange(1, m)
     knots = np.concatenate([x[0] - pad[::-1] * h[0], x, x[-1] + pad * h[-1]])
-    values = _bspline_values(knots, points, degree)
+    # integral of each pair (a, b) of live B-splines over interval i, shape (N - 1,),
+    # computed a chunk of intervals at a time to bound the temporaries
+    pairs = {(a, b): np.empty(n - 1) for a in range(m) for b in range(a, m)}
+    for start in range(0, n - 1, GRAM_CHUNK):
+        stop = min(start + GRAM_CHUNK, n - 1)
+        mid, half = 0.5 * (x[start + 1 : stop + 1] + x[start:stop]), 0.5 * h[start:stop]
+        points = mid[:, None] + half[:, None] * nodes[None, :]  # points of interval i
+        qw = half[:, None] * weights[None, :]
+        values = _bspline_values(knots[start:], points, degree)
+        for (a, b), out in pairs.items():
+            out[start:stop] = (qw * values[a] * values[b]).sum(axis=1)
     # unit-integral scaling: N_j = m / (x_{j+m} - x_j) B_j
     scale = m / (x[m:] - x[:rows])
     ab = np.zeros((m + 1, rows))
-    for a in range(m):
-        for b in range(a, m):
-            per_interval = (qw * values[a] * values[b]).sum(axis=1)  # (N - 1,)
-            d = b - a
-            # interval i couples N_{i-m+1+a} and N_{i-m+1+b}: row j = i - m + 1 + a
-            lo = m - 1 - a  # interval of row 0
-            count = rows - d
-            ab[m - d, d:] += per_interval[lo : lo + count]
+    for (a, b), per_interval in pairs.items():
+        d = b - a
+        # interval i couples N_{i-m+1+a} and N_{i-m+1+b}: row j = i - m + 1 + a
+        lo = m - 1 - a  # interval of row 0
+        count = rows - d
+        ab[m - d, d:] += per_interval[lo : lo + count]
     for d in range(m + 1):
         ab[m - d, d:] *= scale[: rows - d] * scale[d:]
     return ab
@@ -176,7 +185,11 @@ class _BlockLayout:
         """``values`` (..., n) into ``out`` (length, ..., blocks), zero past the end."""
         padded = np.zeros((*values.shape[:-1], self.total))
         padded[..., : values.shape[-1]] = values
-        by_block = padded.reshape(*values.shape[:-1], self.blocks, self.length)
+        return self.arrange_padded(padded, out)
+
+    def arrange_padded(self, padded: FloatArray, out: FloatArray) -> FloatArray:
+        """``padded`` (..., total), zero past n, into ``out`` (length, ..., blocks)."""
+        by_block = padded.reshape(*padded.shape[:-1], self.blocks, self.length)
         out[...] = np.moveaxis(by_block, -1, 0)
         return out
 
@@ -208,11 +221,14 @@ def _takahashi(
     blocks, length = layout.blocks, layout.length
     diag = stack[:, bw]
     # past the end: no coupling and no source, so the window stays zero
+    row = np.zeros((count, layout.total))
     for d in range(1, bw + 1):
-        row = np.zeros((count, n))
         np.divide(stack[:, bw - d, d:], diag[:, : n - d], out=row[:, : n - d])
-        layout.arrange(row, coupling[d - 1])
-    layout.arrange(1.0 / diag**2, source)
+        row[:, n - d :] = 0.0
+        layout.arrange_padded(row, coupling[d - 1])
+    np.divide(1.0, diag, out=row[:, :n])
+    np.square(row, out=row)
+    layout.arrange_padded(row, source)
     zero = np.zeros((count, blocks))
     # 1. each block's map X -> phi X phi^T + psi
     phi = [[np.full((count, blocks), float(a == b)) for b in range(bw)] for a in range(bw)]

@@ -41,9 +41,9 @@ def _criterion(rss: FloatArray, rdof: FloatArray, n: int) -> FloatArray:
     return np.where(rdof < n * 1e-9, np.inf, value)
 
 
-def _rdof(problem: PenalisedSpline, chols: list[FloatArray]) -> FloatArray:
+def _rdof(problem: PenalisedSpline, chols: FloatArray | list[FloatArray]) -> FloatArray:
     """``n - dof`` for each factor, floored as :meth:`PenalisedSpline.statistics` floors it."""
-    traces = problem.traces(np.stack(chols))
+    traces = problem.traces(np.asarray(chols))
     return np.maximum(problem.r.shape[1] - traces, np.finfo(float).tiny)
 
 
@@ -118,18 +118,20 @@ class _Channels:
         """Criterion of channel k at ``log10 p = points[k]``, each at its own p."""
         problem, n = self.problem, self.problem.n_eff
         out = dict.fromkeys(points, float(np.inf))
-        chols, done = [], []
+        stack = np.empty((len(points), *problem.r.shape))
+        done = []
         for k, log_p in points.items():
             p = 10.0**log_p
+            chol = stack[len(done)]
             try:
-                chol = np.array(problem.factor(p))
+                chol[...] = problem.factor(p)
             except linalg.LinAlgError:
                 continue
             fitted, rss = _fits(problem, p, chol, self.y[:, k : k + 1], self.rhs[:, k : k + 1])
-            chols.append(chol)
             done.append((k, log_p, fitted[:, 0], float(rss[0])))
-        if chols:
-            for (k, log_p, fitted, rss), r in zip(done, _rdof(problem, chols), strict=True):
+        if done:
+            rdof = _rdof(problem, stack[: len(done)])
+            for (k, log_p, fitted, rss), r in zip(done, rdof, strict=True):
                 value = _criterion(np.array([rss]), np.array([r]), n)
                 out[k] = float(value[0])
                 self._keep(np.array([k]), value, log_p, fitted[:, None], np.array([rss]), float(r))
@@ -146,9 +148,13 @@ def _lockstep(
     time; a round starts when every unfinished task waits for a value, and
     evaluates all their points in one call to ``evaluate``.
     """
+    if len(tasks) == 1:  # nothing to run side by side
+        ((k, task),) = tasks.items()
+        return {k: task(lambda log_p: evaluate({k: float(log_p)})[k])}
     cond = threading.Condition()
     pending: dict[int, float] = {}
     answers: dict[int, float] = {}
+    ready = {k: threading.Event() for k in tasks}
     active = set(tasks)
     results: dict[int, float] = {}
     errors: list[BaseException] = []
@@ -157,10 +163,11 @@ def _lockstep(
         def criterion(log_p: float) -> float:
             with cond:
                 pending[k] = float(log_p)
-                cond.notify_all()
-                while k not in answers:
-                    cond.wait()
-                return answers.pop(k)
+                if len(pending) >= len(active):
+                    cond.notify()
+            ready[k].wait()
+            ready[k].clear()
+            return answers.pop(k)
 
         return criterion
 
@@ -172,7 +179,7 @@ def _lockstep(
         finally:
             with cond:
                 active.discard(k)
-                cond.notify_all()
+                cond.notify()
 
     threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in tasks]
     for thread in threads:
@@ -188,12 +195,12 @@ def _lockstep(
         try:
             values = evaluate(batch)
         except BaseException:
-            values = dict.fromkeys(batch, float(np.nan))
+            values = dict.fromkeys(batch, float("nan"))  # let the threads finish, then raise
             raise
         finally:
-            with cond:
-                answers.update(values)
-                cond.notify_all()
+            answers.update(values)
+            for k in values:
+                ready[k].set()
     for thread in threads:
         thread.join()
     if errors:

@@ -154,10 +154,12 @@ class SmoothingSpline:
         ps, gcvs, msrs, dofs, variances = (np.zeros(k_all) for _ in range(5))
         self._fits: list[tuple[BSpline, NDArray[np.intp]]] = []
         # channels missing the same samples share their knots, weights and banded matrix
-        patterns, group_of = np.unique(missing.T, axis=0, return_inverse=True)
-        for g, pattern in enumerate(patterns):
-            cols = np.flatnonzero(group_of.reshape(-1) == g)
-            keep = ~pattern
+        groups: dict[bytes, list[int]] = {}
+        for j, key in enumerate(np.packbits(missing, axis=0).T):
+            groups.setdefault(key.tobytes(), []).append(j)
+        for members in groups.values():
+            cols = np.array(members)
+            keep = ~missing[:, members[0]]
             # a missing sample has zero weight, and a zero-weight knot does not change the
             # minimiser: fit the samples present, interpolate the gaps with the same spline
             problem = PenalisedSpline(tt[keep], w[keep], m)
@@ -170,6 +172,7 @@ class SmoothingSpline:
             for j, col in enumerate(cols):
                 gcvs[col], msrs[col] = float(stats[j].gcv[0]), float(stats[j].msr[0])
                 dofs[col], variances[col] = stats[j].dof, float(stats[j].variance[0])
+            del problem  # its bands are as large as the data: not kept while interpolating
             natural = self._natural(tt[keep], fitted_cols, degree)
             self._fits.append((BSpline.construct_fast(*natural), cols))
         self._k = k_all
