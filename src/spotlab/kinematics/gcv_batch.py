@@ -77,7 +77,7 @@ class _Channels:
 
     def _keep(
         self,
-        cols: FloatArray,
+        cols: NDArray[np.intp],
         values: FloatArray,
         log_p: float,
         fit: FloatArray,
@@ -108,7 +108,7 @@ class _Channels:
             fits.append(_fits(problem, p, chol, self.y, self.rhs))
         if not chols:
             return values
-        everyone = np.arange(self.y.shape[1])
+        everyone = np.arange(self.y.shape[1], dtype=np.intp)
         for g, r, (fitted, rss) in zip(rows, _rdof(problem, chols), fits, strict=True):
             values[g] = _criterion(rss, np.full(rss.shape, r), n)
             self._keep(everyone, values[g], float(grid[g]), fitted, rss, float(r))
@@ -119,7 +119,7 @@ class _Channels:
         problem, n = self.problem, self.problem.n_eff
         out = dict.fromkeys(points, float(np.inf))
         stack = np.empty((len(points), *problem.r.shape))
-        done = []
+        done: list[tuple[int, float, FloatArray, float]] = []
         for k, log_p in points.items():
             p = 10.0**log_p
             chol = stack[len(done)]
@@ -127,14 +127,15 @@ class _Channels:
                 chol[...] = problem.factor(p)
             except linalg.LinAlgError:
                 continue
-            fitted, rss = _fits(problem, p, chol, self.y[:, k : k + 1], self.rhs[:, k : k + 1])
-            done.append((k, log_p, fitted[:, 0], float(rss[0])))
+            fit, sums = _fits(problem, p, chol, self.y[:, k : k + 1], self.rhs[:, k : k + 1])
+            done.append((k, log_p, fit[:, 0], float(sums[0])))
         if done:
             rdof = _rdof(problem, stack[: len(done)])
             for (k, log_p, fitted, rss), r in zip(done, rdof, strict=True):
                 value = _criterion(np.array([rss]), np.array([r]), n)
                 out[k] = float(value[0])
-                self._keep(np.array([k]), value, log_p, fitted[:, None], np.array([rss]), float(r))
+                one = np.array([k], dtype=np.intp)
+                self._keep(one, value, log_p, fitted[:, None], np.array([rss]), float(r))
         return out
 
 

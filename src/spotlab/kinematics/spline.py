@@ -194,7 +194,8 @@ class SmoothingSpline:
             else [solve_wood_jennings(problem, y[:, j : j + 1]) for j in range(y.shape[1])]
         )
         parts = [y] if p is not None else [y[:, j : j + 1] for j in range(y.shape[1])]
-        fitted, stats = [], []
+        fitted: list[FloatArray] = []
+        stats: list[FitStatistics] = []
         for value, part in zip(values, parts, strict=True):
             try:
                 fit, st = problem.statistics(value, part)
