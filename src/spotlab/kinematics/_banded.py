@@ -146,29 +146,27 @@ def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
 
 
 def _companion_step(
-    window: list[list[FloatArray]], c: list[FloatArray], source: FloatArray
-) -> tuple[list[list[FloatArray]], FloatArray, list[FloatArray]]:
-    """``T X T^T + source e1 e1^T`` for symmetric windows held as nested lists.
+    window: FloatArray, c: FloatArray, source: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``T X T^T + source e1 e1^T`` for stacks of symmetric windows X (bw, bw, ...).
 
     ``T = [[-c^T], [I, 0]]`` is the companion matrix of one row of the Cholesky
-    factor. Returns the new window, its corner (a diagonal entry of the inverse)
-    and ``y = X c`` (minus the rest of that row of the inverse).
+    factor; ``c`` is (bw, ...). Returns the new window, its corner (a diagonal
+    entry of the inverse) and ``y = X c`` (minus the rest of that row of the inverse),
+    shape (bw, ...).
     """
-    bw = len(c)
-    y = []
-    for a in range(bw):
-        acc = window[a][0] * c[0]
-        for col in range(1, bw):
-            acc = acc + window[a][col] * c[col]
-        y.append(acc)
-    corner = source + c[0] * y[0]
+    bw = c.shape[0]
+    y = (window * c[None]).sum(axis=1)
+    terms = c * y
+    corner = source + terms[0]
     for a in range(1, bw):
-        corner = corner + c[a] * y[a]
-    new: list[list[FloatArray]] = [[corner] * bw for _ in range(bw)]
-    for k in range(1, bw):
-        new[0][k] = new[k][0] = -y[k - 1]
-        for col in range(1, bw):
-            new[k][col] = window[k - 1][col - 1]
+        corner += terms[a]
+    new = np.empty_like(window)
+    new[1:, 1:] = window[:-1, :-1]
+    rest = -y[:-1]
+    new[0, 1:] = rest
+    new[1:, 0] = rest
+    new[0, 0] = corner
     return new, corner, y
 
 
@@ -196,7 +194,7 @@ class _BlockLayout:
 
 def _takahashi(
     chol: FloatArray, layout: _BlockLayout, coupling: FloatArray, source: FloatArray
-) -> Iterator[tuple[int, FloatArray, list[FloatArray]]]:
+) -> Iterator[tuple[int, FloatArray, FloatArray]]:
     """Steps of Takahashi's recursion for all blocks (and factors) at once, last sample first.
 
     ``chol`` is one upper banded factor (bw + 1, n) or a stack (C, bw + 1, n).
@@ -226,26 +224,22 @@ def _takahashi(
         np.divide(stack[:, bw - d, d:], diag[:, : n - d], out=row[:, : n - d])
         row[:, n - d :] = 0.0
         layout.arrange_padded(row, coupling[d - 1])
-    np.divide(1.0, diag, out=row[:, :n])
-    np.square(row, out=row)
+    np.square(diag, out=row[:, :n])
+    np.divide(1.0, row[:, :n], out=row[:, :n])
     layout.arrange_padded(row, source)
-    zero = np.zeros((count, blocks))
-    # 1. each block's map X -> phi X phi^T + psi
-    phi = [[np.full((count, blocks), float(a == b)) for b in range(bw)] for a in range(bw)]
-    psi = [[zero] * bw for _ in range(bw)]
+    # 1. each block's map X -> phi X phi^T + psi, as stacks (bw, bw, C, blocks)
+    phi = np.zeros((bw, bw, count, blocks))
+    for a in range(bw):
+        phi[a, a] = 1.0
+    psi = np.zeros((bw, bw, count, blocks))
     for j in range(length - 1, -1, -1):
-        c = [coupling[k, j] for k in range(bw)]
-        top = []
-        for col in range(bw):
-            acc = phi[0][col] * c[0]
-            for k in range(1, bw):
-                acc = acc + phi[k][col] * c[k]
-            top.append(-acc)
-        phi = [top, *phi[:-1]]
+        c = coupling[:, j]
+        top = -(phi * c[:, None]).sum(axis=0)
+        phi = np.concatenate([top[None], phi[:-1]])
         psi, _, _ = _companion_step(psi, c, source[j])
     # (C, blocks, bw, bw)
-    phi_b: FloatArray = np.moveaxis(np.array(phi), (2, 3), (0, 1))
-    psi_b: FloatArray = np.moveaxis(np.array(psi), (2, 3), (0, 1))
+    phi_b: FloatArray = np.moveaxis(phi, (2, 3), (0, 1))
+    psi_b: FloatArray = np.moveaxis(psi, (2, 3), (0, 1))
     # 2. the window at the end of each block
     ends = np.zeros((count, blocks, bw, bw))
     x = np.zeros((count, bw, bw))
@@ -253,9 +247,9 @@ def _takahashi(
         ends[:, b] = x
         x = phi_b[:, b] @ x @ np.swapaxes(phi_b[:, b], 1, 2) + psi_b[:, b]
     # 3. all blocks from their ends at once
-    window = [[np.ascontiguousarray(ends[:, :, a, b]) for b in range(bw)] for a in range(bw)]
+    window = np.ascontiguousarray(np.moveaxis(ends, (2, 3), (0, 1)))
     for j in range(length - 1, -1, -1):
-        window, corner, y = _companion_step(window, [coupling[k, j] for k in range(bw)], source[j])
+        window, corner, y = _companion_step(window, coupling[:, j], source[j])
         yield j, corner, y
 
 
@@ -304,11 +298,12 @@ class InverseTrace:
 
     def many(self, chol: FloatArray) -> FloatArray:
         """The traces, shape (C,), for a stack of upper banded factors ``chol`` (C, bw + 1, n)."""
-        bw = chol.shape[1] - 1
         coupling, source = self._arrays(chol.shape[0])
         acc = np.zeros((chol.shape[0], self.layout.blocks))
         for j, corner, y in _takahashi(chol, self.layout, coupling, source):
             acc += corner * self.r[0, j]
-            for k in range(1, bw + 1):
-                acc -= y[k - 1] * self.r[k, j]
+            # term by term, in this order: GCV's minimum is flat, so the searched p follows
+            # the trace's last bits (the batched and one-channel searches must agree)
+            for term in y * self.r[1:, j, None]:
+                acc -= term
         return np.asarray(acc.sum(axis=1), dtype=np.float64)
