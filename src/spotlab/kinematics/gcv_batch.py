@@ -119,23 +119,39 @@ class _Channels:
         problem, n = self.problem, self.problem.n_eff
         out = dict.fromkeys(points, float(np.inf))
         stack = np.empty((len(points), *problem.r.shape))
-        done: list[tuple[int, float, FloatArray, float]] = []
+        delta = np.empty((problem.r.shape[1], len(points)))
+        ks: list[int] = []
+        log_ps: list[float] = []
         for k, log_p in points.items():
-            p = 10.0**log_p
-            chol = stack[len(done)]
+            i = len(ks)
             try:
-                chol[...] = problem.factor(p)
+                stack[i] = problem.factor(10.0**log_p)
             except linalg.LinAlgError:
                 continue
-            fit, sums = _fits(problem, p, chol, self.y[:, k : k + 1], self.rhs[:, k : k + 1])
-            done.append((k, log_p, fit[:, 0], float(sums[0])))
-        if done:
-            rdof = _rdof(problem, stack[: len(done)])
-            for (k, log_p, fitted, rss), r in zip(done, rdof, strict=True):
-                value = _criterion(np.array([rss]), np.array([r]), n)
-                out[k] = float(value[0])
-                one = np.array([k], dtype=np.intp)
-                self._keep(one, value, log_p, fitted[:, None], np.array([rss]), float(r))
+            solved, info = lapack.dpbtrs(stack[i], self.rhs[:, k : k + 1], lower=0)
+            if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
+                raise linalg.LinAlgError(f"banded solve failed (info {info})")
+            delta[:, i] = solved[:, 0]
+            ks.append(k)
+            log_ps.append(log_p)
+        if not ks:
+            return out
+        count = len(ks)
+        cols = np.array(ks, dtype=np.intp)
+        # the one-channel arithmetic, column by column: f = y - p (m!)^2 W^-1 Q delta
+        # p as Python floats: numpy's vectorised power may differ from libm in the last bit
+        ps = np.array([10.0**log_p * problem.factorial2 for log_p in log_ps])
+        scale = ps[None, :] * problem.winv[:, None]
+        y = self.y[:, cols]
+        fitted = y - scale * _banded.q_times(problem.q, delta[:, :count])
+        # contiguous rows: each sum runs in the order of a one-column sum
+        rss = np.ascontiguousarray((problem.w[:, None] * (y - fitted) ** 2).T).sum(axis=1)
+        rdof = _rdof(problem, stack[:count])
+        values = _criterion(rss, rdof, n)
+        for i, k in enumerate(ks):
+            out[k] = float(values[i])
+            self._keep(cols[i : i + 1], values[i : i + 1], log_ps[i], fitted[:, i : i + 1],
+                       rss[i : i + 1], float(rdof[i]))  # fmt: skip
         return out
 
 
