@@ -57,7 +57,8 @@ def _fits(
     fitted = y - (p * problem.factorial2) * problem.winv[:, None] * _banded.q_times(
         problem.q, delta
     )
-    rss = (problem.w[:, None] * (y - fitted) ** 2).sum(axis=0)
+    # contiguous rows: each sum runs in the order of a one-column sum
+    rss = np.ascontiguousarray((problem.w[:, None] * (y - fitted) ** 2).T).sum(axis=1)
     return fitted, rss
 
 
@@ -96,20 +97,19 @@ class _Channels:
         """Criterion of every channel at every grid point, shape (G, K)."""
         problem, n = self.problem, self.problem.n_eff
         values = np.full((grid.size, self.y.shape[1]), np.inf)
-        chols, rows, fits = [], [], []
+        chols, rows = [], []
         for g, log_p in enumerate(grid):
-            p = 10.0 ** float(log_p)
             try:
-                chol = np.array(problem.factor(p))
+                chols.append(np.array(problem.factor(10.0 ** float(log_p))))
             except linalg.LinAlgError:
                 continue
-            chols.append(chol)
             rows.append(g)
-            fits.append(_fits(problem, p, chol, self.y, self.rhs))
         if not chols:
             return values
         everyone = np.arange(self.y.shape[1], dtype=np.intp)
-        for g, r, (fitted, rss) in zip(rows, _rdof(problem, chols), fits, strict=True):
+        # traces first (one recursion for all grid points), then one grid point's fits at a time
+        for g, r, chol in zip(rows, _rdof(problem, chols), chols, strict=True):
+            fitted, rss = _fits(problem, 10.0 ** float(grid[g]), chol, self.y, self.rhs)
             values[g] = _criterion(rss, np.full(rss.shape, r), n)
             self._keep(everyone, values[g], float(grid[g]), fitted, rss, float(r))
         return values
