@@ -175,6 +175,7 @@ def _lockstep(
     active = set(tasks)
     results: dict[int, float] = {}
     errors: list[BaseException] = []
+    aborted = threading.Event()
 
     def criterion_of(k: int) -> Callable[[float], float]:
         def criterion(log_p: float) -> float:
@@ -184,6 +185,8 @@ def _lockstep(
                     cond.notify()
             ready[k].wait()
             ready[k].clear()
+            if aborted.is_set():
+                raise _Aborted
             return answers.pop(k)
 
         return criterion
@@ -191,6 +194,8 @@ def _lockstep(
     def run(k: int) -> None:
         try:
             results[k] = tasks[k](criterion_of(k))
+        except _Aborted:
+            pass
         except BaseException as exc:  # handed to the caller below
             errors.append(exc)
         finally:
@@ -201,28 +206,33 @@ def _lockstep(
     threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in tasks]
     for thread in threads:
         thread.start()
-    while True:
-        with cond:
-            while active and len(pending) < len(active):
-                cond.wait()
-            if not active:
-                break
-            batch = dict(pending)
-            pending.clear()
-        try:
-            values = evaluate(batch)
-        except BaseException:
-            values = dict.fromkeys(batch, float("nan"))  # let the threads finish, then raise
-            raise
-        finally:
-            answers.update(values)
-            for k in values:
+    try:
+        while True:
+            with cond:
+                while active and len(pending) < len(active):
+                    cond.wait()
+                if not active:
+                    break
+                batch = dict(pending)
+                pending.clear()
+            answers.update(evaluate(batch))
+            for k in batch:
                 ready[k].set()
-    for thread in threads:
-        thread.join()
+    except BaseException:
+        aborted.set()  # every waiting task stops at its next criterion call
+        for event in ready.values():
+            event.set()
+        raise
+    finally:
+        for thread in threads:
+            thread.join()
     if errors:
         raise errors[0]
     return results
+
+
+class _Aborted(Exception):
+    """Raised in a lockstep task when the batch evaluation failed."""
 
 
 def gcv_fit_many(
