@@ -122,16 +122,23 @@ class _Channels:
         delta = np.empty((problem.r.shape[1], len(points)))
         ks: list[int] = []
         log_ps: list[float] = []
+        # channels asking for the same p (the first Brent point of a shared bracket) share
+        # its factor and trace
+        factor_of: dict[float, int] = {}
+        which: list[int] = []
         for k, log_p in points.items():
-            i = len(ks)
-            try:
-                stack[i] = problem.factor(10.0**log_p)
-            except linalg.LinAlgError:
-                continue
-            solved, info = lapack.dpbtrs(stack[i], self.rhs[:, k : k + 1], lower=0)
+            if log_p not in factor_of:
+                try:
+                    stack[len(factor_of)] = problem.factor(10.0**log_p)
+                except linalg.LinAlgError:
+                    continue
+                factor_of[log_p] = len(factor_of)
+            chol = stack[factor_of[log_p]]
+            solved, info = lapack.dpbtrs(chol, self.rhs[:, k : k + 1], lower=0)
             if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
                 raise linalg.LinAlgError(f"banded solve failed (info {info})")
-            delta[:, i] = solved[:, 0]
+            delta[:, len(ks)] = solved[:, 0]
+            which.append(factor_of[log_p])
             ks.append(k)
             log_ps.append(log_p)
         if not ks:
@@ -146,7 +153,7 @@ class _Channels:
         fitted = y - scale * _banded.q_times(problem.q, delta[:, :count])
         # contiguous rows: each sum runs in the order of a one-column sum
         rss = np.ascontiguousarray((problem.w[:, None] * (y - fitted) ** 2).T).sum(axis=1)
-        rdof = _rdof(problem, stack[:count])
+        rdof = _rdof(problem, stack[: len(factor_of)])[which]
         values = _criterion(rss, rdof, n)
         for i, k in enumerate(ks):
             out[k] = float(values[i])
