@@ -156,7 +156,7 @@ def _companion_step(
     shape (bw, ...).
     """
     bw = c.shape[0]
-    y = (window * c[None]).sum(axis=1)
+    y = np.add.reduce(window * c[None], axis=1)
     terms = c * y
     corner = source + terms[0]
     for a in range(1, bw):
@@ -234,7 +234,7 @@ def _takahashi(
     psi = np.zeros((bw, bw, count, blocks))
     for j in range(length - 1, -1, -1):
         c = coupling[:, j]
-        top = -(phi * c[:, None]).sum(axis=0)
+        top = np.negative(np.add.reduce(phi * c[:, None], axis=0))
         phi = np.concatenate([top[None], phi[:-1]])
         psi, _, _ = _companion_step(psi, c, source[j])
     # (C, blocks, bw, bw)
@@ -243,9 +243,10 @@ def _takahashi(
     # 2. the window at the end of each block
     ends = np.zeros((count, blocks, bw, bw))
     x = np.zeros((count, bw, bw))
+    phi_t = np.swapaxes(phi_b, 2, 3)
     for b in range(blocks - 1, -1, -1):
         ends[:, b] = x
-        x = phi_b[:, b] @ x @ np.swapaxes(phi_b[:, b], 1, 2) + psi_b[:, b]
+        x = phi_b[:, b] @ x @ phi_t[:, b] + psi_b[:, b]
     # 3. all blocks from their ends at once
     window = np.ascontiguousarray(np.moveaxis(ends, (2, 3), (0, 1)))
     for j in range(length - 1, -1, -1):
