@@ -154,3 +154,6 @@ def test_smooth_writes_each_coordinate_smoothed_and_keeps_gaps(
     expected = smooth_trial(original).points
     assert np.allclose(written.points, expected, atol=1e-3, equal_nan=True)
     assert not np.allclose(written.points, original.points, atol=1.0, equal_nan=True)
+    trc = tmp_path / "smooth.trc"
+    assert main(["export", str(source), "--trc", str(trc), "--smooth"]) == 0
+    assert "smoothed           quintic GCV spline" in capsys.readouterr().out

@@ -194,6 +194,8 @@ def run(args: argparse.Namespace) -> int:
             f"converted {summary['frames']} frames x {summary['markers']} markers at "
             f"{summary['rate_hz']:g} Hz"
         )
+        if "smoothed" in summary:
+            print(f"  smoothed           {summary['smoothed']}")
         for out in outputs:
             print(f"  wrote              {out}")
     return 0
