@@ -91,6 +91,9 @@ class SmoothingSpline:
     & Jennings (1979, J Biomech 12:477-479) as used by Yeadon
     (1990). Outside ``[t_1, t_N]`` the spline is its natural extension, a
     polynomial of degree m - 1.
+    Channels of ``y`` (N, K) missing the same samples share one banded matrix,
+    and their GCV searches run batched (:mod:`spotlab.kinematics.gcv_batch`):
+    the results are those of K one-channel calls.
 
     Examples
     --------
