@@ -165,10 +165,12 @@ class SmoothingSpline:
             keep = ~missing[:, members[0]]
             # a missing sample has zero weight, and a zero-weight knot does not change the
             # minimiser: fit the samples present, interpolate the gaps with the same spline
-            problem = PenalisedSpline(tt[keep], w[keep], m)
-            block = yy[keep][:, cols]
+            whole = bool(keep.all())  # no copies of long records without gaps
+            x = tt if whole else tt[keep]
+            problem = PenalisedSpline(x, w if whole else w[keep], m)
+            block = yy if whole and len(members) == k_all else yy[keep][:, cols]
             if p is None and sigma is None:
-                pg, fitted, stats = gcv_fit_many(problem, block, x=tt[keep])
+                pg, fitted, stats = gcv_fit_many(problem, block, x=x)
             else:
                 pg, fitted, stats = self._fit_given(problem, block, p)
             ps[cols], fitted_cols = pg, fitted
@@ -176,7 +178,7 @@ class SmoothingSpline:
                 gcvs[col], msrs[col] = float(stats[j].gcv[0]), float(stats[j].msr[0])
                 dofs[col], variances[col] = stats[j].dof, float(stats[j].variance[0])
             del problem  # its bands are as large as the data: not kept while interpolating
-            natural = self._natural(tt[keep], fitted_cols, degree)
+            natural = self._natural(x, fitted_cols, degree)
             self._fits.append((BSpline.construct_fast(*natural), cols))
         self._k = k_all
         self.p = self._pack(ps)
