@@ -297,7 +297,7 @@ def _finish(
 ) -> tuple[FloatArray, FloatArray, list[FitStatistics]]:
     """p, fitted values and figures at each channel's chosen ``log10 p``."""
     problem, n = channels.problem, channels.problem.n_eff
-    fitted = np.array(channels.best_fit)
+    fitted = channels.best_fit
     rss, rdof = np.array(channels.best_rss), np.array(channels.best_rdof)
     redo = [k for k in range(log_p.size) if channels.best_log_p[k] != log_p[k]]
     if redo:
@@ -319,4 +319,5 @@ def _finish(
                 msr=msr, dof=n - rdof[k], gcv=msr / (rdof[k] / n) ** 2, variance=msr * n / rdof[k]
             )
         )
-    return 10.0**log_p, fitted, stats
+    # p as Python floats, like the one-channel search (numpy's power may differ in the last bit)
+    return np.array([10.0 ** float(v) for v in log_p]), fitted, stats
