@@ -25,6 +25,7 @@ from spotlab.console.blob_trajectories import (
 )
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import MarkerObservations, load_observations
+from spotlab.console.paths import check_output_paths
 from spotlab.console.progress import Progress
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Rig
@@ -121,8 +122,7 @@ def check_outputs(paths: Sequence[Path]) -> None:
             raise CommandError(
                 f"{path}: unknown output format {path.suffix!r} ({', '.join(TRIAL_WRITERS)})"
             )
-        if not path.parent.is_dir():
-            raise CommandError(f"{path}: the folder {path.parent} does not exist")
+    check_output_paths(("output", path) for path in paths)
 
 
 def write_trial(path: Path, trial: Trial, drop_groups: Collection[str] = ()) -> None:

@@ -304,8 +304,38 @@ def _decode(
             "notes": notes,
             "unreadable_parameters": list(get.failures),
             "c3d_parameters": params,
+            "point_kinds": _point_kinds(get),
         },
     )
+
+
+#: POINT parameters listing the labels of points that are not markers (Vicon, pyCGM2:
+#: model outputs stored as points), and the kind each stands for.
+_NOT_MARKERS = {
+    "ANGLES": "angle",
+    "FORCES": "force",
+    "MOMENTS": "moment",
+    "POWERS": "power",
+    "SCALARS": "scalar",
+    "REACTIONS": "reaction",
+    "MODELED_MARKERS": "modelled",
+}
+
+
+def _point_kinds(get: _Lookup) -> dict[str, str]:
+    """Labels of points that are not measured markers (model outputs), and their kind:
+    those listed by POINT:ANGLES, FORCES, MOMENTS, POWERS, SCALARS, MODELED_MARKERS and
+    any other POINT parameter named in POINT:TYPE_GROUPS."""
+    groups = dict(_NOT_MARKERS)
+    named = get("POINT:TYPE_GROUPS", "strings") or []
+    for name in named[::2]:
+        groups.setdefault(name.upper(), name.lower())
+    kinds: dict[str, str] = {}
+    for key, kind in groups.items():
+        for label in get(f"POINT:{key}", "strings") or []:
+            if label:
+                kinds.setdefault(label, kind)
+    return kinds
 
 
 def _settle_scale(parameter: float, in_header: float, notes: list[str]) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 from pathlib import Path
 
@@ -11,7 +12,11 @@ import pytest
 from spotlab.core.errors import RecordingError
 from spotlab.io import Trial, read_c3d, write_c3d
 
-DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
+# as tests/conftest.py SHARED_DATA: ../shared/data, or $SPOTLAB_SHARED_DATA
+DATA = Path(
+    os.environ.get("SPOTLAB_SHARED_DATA")
+    or Path(__file__).resolve().parents[3].parent / "shared" / "data"
+)
 FOLDERS = ("c3d_org_samples", "ezc3d_testfiles", "bmc")
 FILES = sorted(
     str(p.relative_to(DATA))

@@ -25,6 +25,7 @@ from typing import Any
 
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
+from spotlab.console.paths import check_output_paths
 from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
 from spotlab.console.synchronised_export import reconstruct_recording
 from spotlab.console.trajectories import (
@@ -33,10 +34,8 @@ from spotlab.console.trajectories import (
     reconstruct_file,
     write_trial,
 )
-from spotlab.io import Trial, read_c3d, read_trc
+from spotlab.io import TRIAL_READERS, Trial
 from spotlab.kinematics import smooth_trial
-
-TRIAL_READERS = {".c3d": read_c3d, ".trc": read_trc}
 
 
 def add_parser(sub: Any) -> None:
@@ -117,6 +116,14 @@ def _outputs(args: argparse.Namespace) -> list[Path]:
     for flag, path in (("--c3d", args.c3d), ("--trc", args.trc)):
         if path is not None and path.suffix.lower() != "." + flag[2:]:
             raise CommandError(f"{flag} {path}: the file name must end in .{flag[2:]}")
+    check_output_paths(
+        [
+            ("--c3d", args.c3d),
+            ("--trc", args.trc),
+            ("--timestamps", args.timestamps),
+            ("--sync-report", args.sync_report),
+        ]
+    )
     check_outputs(outputs)
     return outputs
 

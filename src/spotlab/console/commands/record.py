@@ -8,11 +8,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-import spotlab.simulators  # noqa: F401  (registers the sim:// URL scheme with pyserial)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.console.blob_trajectories import MODEL_KEY, model_metadata
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_paths
 from spotlab.console.progress import Progress
 from spotlab.core.wire import LinkEventKind
 from spotlab.drivers import Driver, available_families, load_driver
@@ -142,6 +142,7 @@ class OutageWatch:
 def run(args: argparse.Namespace) -> int:
     if not args.seconds > 0:
         raise CommandError(f"--seconds must be positive, got {args.seconds}")
+    check_output_paths([("--out", args.out)])
     if args.out.exists() and not args.overwrite:
         raise CommandError(f"{args.out} exists; choose another --out or add --overwrite")
     drivers = build_drivers(args)

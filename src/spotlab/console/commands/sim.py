@@ -10,10 +10,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_dir, check_output_paths
+from spotlab.io import FileFormatError
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
-from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
-from spotlab.simulators.motions import MOTIONS
+from spotlab.simulators.centroid_service import (
+    CENTROID_MOTIONS,
+    LFRAME_MARKERS,
+    CentroidSimOptions,
+    serve_centroid_pty,
+)
+from spotlab.simulators.faults import parse_schedule
+from spotlab.simulators.lab import lab_dir
+from spotlab.simulators.motions import MOTIONS, from_c3d, make_motion, static_points
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -55,9 +64,28 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
     p.add_argument("--faults", default="", help="fault schedule, e.g. 'bitflip@1.5,drop@2,reset@6'")
     p.add_argument("--fault-log", type=Path, help="write what was injected as JSON")
-    p.add_argument("--clock-offset", type=float, default=0.0, metavar="SECONDS")
-    p.add_argument("--clock-drift-ppm", type=float, default=0.0, metavar="PPM")
-    p.add_argument("--clock-jitter", type=float, default=0.0, metavar="SECONDS")
+    p.add_argument(
+        "--clock-offset",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="the device counter reads this many seconds at power-up (default 0)",
+    )
+    p.add_argument(
+        "--clock-drift-ppm",
+        type=float,
+        default=0.0,
+        metavar="PPM",
+        help="the device oscillator's error in parts per million, positive runs fast (default 0)",
+    )
+    p.add_argument(
+        "--clock-jitter",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="RMS scatter (s) of the instant a frame is taken around the time its timestamp "
+        "names (default 0)",
+    )
     p.add_argument(
         "--clock-step",
         action="append",
@@ -68,9 +96,12 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--motion",
-        default="wand",
-        help="wand, cluster, gait, lframe (static L-frame), or a C3D file whose markers "
-        "move the LEDs",
+        default=None,
+        help="selspot: wand (default), cluster, gait, lframe (static L-frame), or a C3D file "
+        "whose markers move the LEDs; centroid: walk (default, the 40-marker body), static "
+        "(the body standing still, swaying a few mm), rom (range of motion: every joint "
+        "moves while the subject turns on the spot), wand (a passive wand of --markers 2 or "
+        "3 waved through the volume) or lframe (a static L-frame on the floor)",
     )
     p.add_argument(
         "--reflectance",
@@ -83,6 +114,15 @@ def add_parser(sub: Any) -> None:
         type=Path,
         metavar="RIG.toml",
         help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
+    )
+    p.add_argument(
+        "--frame-points-out",
+        type=Path,
+        metavar="POINTS.csv",
+        help="write the reference object's published coordinates (mm) as CSV, the "
+        "--frame-points table of spotlab calibrate: selspot: the motion's static markers "
+        "(the L-frame first), columns marker (LED number, 1-based), X, Y, Z; centroid: the "
+        "L-frame's markers, columns X, Y, Z",
     )
     p.add_argument(
         "--ring-phase",
@@ -120,7 +160,16 @@ def add_parser(sub: Any) -> None:
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
     cen = p.add_argument_group("centroid (video cameras, passive markers)")
-    cen.add_argument("--markers", type=int, default=40, help="markers on the walking body (40)")
+    cen.add_argument(
+        "--markers", type=int, default=None,
+        help="markers: on the walking body (default 40), on the wand (2 or 3, default 3), "
+        "of the L-frame (default 4)",
+    )  # fmt: skip
+    cen.add_argument(
+        "--wand-length", type=float, default=500.0, metavar="MM",
+        help="wand: distance between its end markers (default 500 mm); a 3-marker wand's "
+        "middle marker sits 0.4 of it from end A",
+    )  # fmt: skip
     cen.add_argument(
         "--ghosts", type=float, default=0.02, metavar="RATE",
         help="fraction of (camera, marker) pairs that see a floor-reflection ghost (0.02)",
@@ -128,11 +177,12 @@ def add_parser(sub: Any) -> None:
     cen.add_argument("--noise-blobs", type=float, default=0.02, help="noise blobs per image")
     cen.add_argument(
         "--sunlight", action="append", default=[], metavar="[CAM@]AT:DURATION",
-        help="camera CAM (default 0) sees thousands of blobs from AT s after START:; repeat",
+        help="camera CAM (1 to --cameras, default 1) sees thousands of blobs from AT s "
+        "after START:; repeat",
     )  # fmt: skip
     cen.add_argument(
         "--camera-off", action="append", default=[], metavar="CAM@AT:DURATION",
-        help="camera CAM delivers no frames from AT s after START:; repeat",
+        help="camera CAM (1 to --cameras) delivers no frames from AT s after START:; repeat",
     )  # fmt: skip
     cen.add_argument("--no-occlusion", action="store_true", help="body segments hide nothing")
     cen.add_argument(
@@ -155,7 +205,7 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         raise CommandError(f"--rate must be positive, got {args.rate}")
     if not 0.0 <= args.reflectance <= 1.0:
         raise CommandError(f"--reflectance must be 0 to 1, got {args.reflectance}")
-    motion = args.motion
+    motion = args.motion or "wand"
     if motion not in MOTIONS and not Path(motion).is_file():
         raise CommandError(f"--motion {motion!r} is neither {', '.join(MOTIONS)} nor a C3D file")
     return service.SelspotSimOptions(
@@ -178,6 +228,22 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         lab_name=getattr(args, "lab_name", None) or "selspot",
         lab=getattr(args, "lab", None),
     )
+
+
+def _write_frame_points(path: Path, options: service.SelspotSimOptions) -> None:
+    """The static markers' coordinates of the simulated motion, for ``spotlab calibrate``."""
+    check_output_paths([("--frame-points-out", path)])
+    try:
+        points = static_points(make_motion(options.motion, options.leds, options.seed))
+    except (OSError, ValueError) as exc:
+        raise CommandError(f"--motion {options.motion}: {exc}") from None
+    if not points:
+        raise CommandError(
+            f"--frame-points-out: --motion {options.motion} with --leds {options.leds} has no "
+            "static markers (use --motion lframe, or more LEDs than the motion moves)"
+        )
+    rows = [f"{i + 1},{x:g},{y:g},{z:g}\n" for i, _label, (x, y, z) in points]
+    path.write_text("marker,X,Y,Z\n" + "".join(rows))
 
 
 def clock_steps_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
@@ -221,16 +287,47 @@ def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions
     return options
 
 
+def _episodes(items: list[str], option: str, cameras: int, *, default_camera: bool) -> str:
+    """``[CAM@]AT:DURATION`` options, cameras counted from 1 as everywhere on the command
+    line, as the simulator's ``CAM@AT:DURATION`` list (cameras counted from 0)."""
+    out = []
+    for item in items:
+        cam, sep, rest = item.partition("@")
+        if not sep:
+            if not default_camera:
+                raise CommandError(f"{option} {item!r}: expected CAM@AT:DURATION")
+            cam, rest = "1", item
+        try:
+            number = int(cam)
+        except ValueError:
+            raise CommandError(f"{option} {item!r}: CAM must be a camera number") from None
+        if not 1 <= number <= cameras:
+            raise CommandError(f"{option} {item!r}: cameras are numbered 1 to {cameras}")
+        out.append(f"{number - 1}@{rest}")
+    return ",".join(out)
+
+
 def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     """Video-centroid simulator options from parsed command-line arguments."""
-    sun = [item if "@" in item else f"0@{item}" for item in args.sunlight]
+    cameras = 8 if args.cameras is None else args.cameras
+    sun = _episodes(args.sunlight, "--sunlight", cameras, default_camera=True)
+    off = _episodes(args.camera_off, "--camera-off", cameras, default_camera=False)
+    motion = args.motion or "walk"
+    if motion not in CENTROID_MOTIONS:
+        raise CommandError(
+            f"--motion {motion!r}: the centroid simulator plays {', '.join(CENTROID_MOTIONS)}"
+        )
+    markers = args.markers
+    if markers is None:
+        markers = {"wand": 3, "lframe": LFRAME_MARKERS}.get(motion, 40)
     options = CentroidSimOptions(
-        cameras=8 if args.cameras is None else args.cameras, markers=args.markers,
+        cameras=cameras, markers=markers, motion=motion,
+        wand_length_mm=args.wand_length, frame_points_out=args.frame_points_out,
         rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
         rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
-        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=",".join(sun),
-        camera_off=",".join(args.camera_off), occlusion=0 if args.no_occlusion else 1,
+        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=sun,
+        camera_off=off, occlusion=0 if args.no_occlusion else 1,
         lab_name=args.lab_name or "centroid", lab=args.lab,
     )  # fmt: skip
     try:
@@ -240,11 +337,41 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     return options
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """Refuse what would fail once the device serves: bad output paths, lab folder,
+    fault schedule or motion file (a failure in the serving thread is no clear error)."""
+    check_output_paths(
+        [
+            ("--truth", args.truth),
+            ("--fault-log", args.fault_log),
+            ("--rig-out", args.rig_out),
+            ("--model-out", getattr(args, "model_out", None)),
+            ("--frame-points-out", getattr(args, "frame_points_out", None)),
+        ]
+    )
+    check_output_dir("--lab" if args.lab is not None else "lab folder", lab_dir(args.lab))
+    try:
+        parse_schedule(args.faults)
+    except ValueError as exc:
+        raise CommandError(f"--faults: {exc}") from None
+    motion = str(args.motion)
+    if args.family == "selspot" and motion not in MOTIONS and Path(motion).is_file():
+        try:
+            from_c3d(motion)
+        except (ValueError, FileFormatError) as exc:
+            raise CommandError(f"--motion: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
+    check_args(args)
     if args.family == "centroid":
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
         options = centroid_options_from_args(args)
+        if args.model_out is not None and options.motion != "walk":
+            raise CommandError(
+                "--model-out: the marker model is the walking body's (--motion walk)"
+            )
         if args.model_out is not None:
             write_body_model(args.model_out, options.markers, options.seed)
         return _serve(args, serve_centroid_pty(options))
@@ -255,6 +382,8 @@ def run(args: argparse.Namespace) -> int:
     if args.input:
         raise CommandError("--input wires timer inputs; selspot systems have none")
     options = options_from_args(args)
+    if args.frame_points_out is not None:
+        _write_frame_points(args.frame_points_out, options)
     server = (
         service.serve_tcp(options, port=args.tcp)
         if args.tcp is not None
