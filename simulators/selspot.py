@@ -113,8 +113,10 @@ class SelspotDevice(SpxCommands):
         #: transport sets it): flow control holds them in the FIFO, so a host that
         #: falls behind sees whole frames dropped, never frames cut into CRC errors.
         self.host_backlog = 0
-        #: Resets and power-ups so far (a transport clears the bytes it holds back).
+        #: Resets and power-ups so far, and the world ns of the latest (a transport
+        #: clears the bytes it holds back).
         self.resets = 0
+        self.last_reset_ns = now
         self.mark_simulated = mark_simulated
         self._default_rate_mhz = rate_mhz
         noise, garble = np.random.SeedSequence([seed, 0x5E15]).spawn(2)
@@ -345,6 +347,7 @@ class SelspotDevice(SpxCommands):
         """Reset, BREAK or power-up: 9600 baud, defaults, stream stopped, banner."""
         self.line.cut(t, None if fault is None else fault.id)
         self.resets += 1  # the transport drops what flow control still held in the FIFO
+        self.last_reset_ns = t
         self._stream = None
         self._overflow_left = 0
         self._asm.clear()

@@ -62,7 +62,7 @@ RETRY_INTERVAL = 0.05
 RECOVERY_RESET_WAIT = 0.5
 #: Silence (no byte at all) after which a streaming device counts as gone (s): a device
 #: at 50 Hz and up sends every 20 ms; a busy host may not read for a few hundred ms.
-SILENCE_S = 1.0
+SILENCE_S = 0.5
 #: Bytes (at least) that may arrive without a valid frame before the link counts as garbage
 #: (one longest MCS-1 frame).
 MIN_FRAME_WINDOW = 1 << 16

@@ -32,7 +32,7 @@ from types import TracebackType
 
 import numpy as np
 
-from spotlab.simulators.line import garble
+from spotlab.simulators.line import Segment, garble
 from spotlab.simulators.selspot import SelspotDevice
 
 TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on Linux
@@ -41,8 +41,9 @@ MAX_WAIT_S = 0.05
 #: Bytes an adapter and the host's driver take in before flow control holds the device
 #: back (what waits beyond this counts against the device's FIFO).
 HOST_SLACK = 1 << 16
-#: Longest stretch of device time simulated between two writes to the port (ns).
-CATCH_UP_NS = 20_000_000
+#: A device more than this far behind real time (ns) catches up in steps of this length,
+#: writing to the port between them.
+CATCH_UP_NS = 100_000_000
 
 
 def tty_baud(fd: int) -> int | None:
@@ -168,9 +169,10 @@ class PtyServer:
             # A device that fell behind (its host is busy) catches up in steps, its
             # bytes written between them, as a real one sends while it works.
             real = time.monotonic_ns()
-            now = real if served is None else min(real, served + CATCH_UP_NS)
-            served = now
+            behind = served is not None and real - served > CATCH_UP_NS
+            now = served + CATCH_UP_NS if served is not None and behind else real
             if self.device.link_down(now):
+                now = served = real  # nothing to send while the port is away: keep time
                 if self._master is not None:
                     self._close_pty()
                 back = self.device.link_return_ns(now)
@@ -183,6 +185,7 @@ class PtyServer:
                 )
                 select.select([self._wake_r], [], [], wait)
                 continue
+            served = now
             if self._master is None:
                 self._open_pty()
                 self.stats["reconnects"] += 1
@@ -192,11 +195,8 @@ class PtyServer:
         master = self._master
         assert master is not None
         host_baud = tty_baud(master)
-        if self.device.resets != self._resets_seen:  # a reset emptied the FIFO
-            self._resets_seen = self.device.resets
-            self._pending.clear()
         self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
-        for seg in self.device.output_segments(now):
+        for seg in self._segments(now):
             data = seg.data
             if host_baud is not None and host_baud != seg.baud:
                 data = garble(data, seg.baud, host_baud, self._rng)
@@ -222,6 +222,17 @@ class PtyServer:
         if self._wake_r in readable:
             with contextlib.suppress(OSError):
                 os.read(self._wake_r, 64)
+
+    def _segments(self, now: int) -> list[Segment]:
+        """The device's output until ``now``; a reset meanwhile empties what flow control
+        held back (bytes the host had not taken: they were still in the device's FIFO)."""
+        segments = self.device.output_segments(now)
+        if self.device.resets != self._resets_seen:
+            self._resets_seen = self.device.resets
+            if len(self._pending) > HOST_SLACK:
+                self._pending.clear()
+                segments = [g for g in segments if g.end_ns >= self.device.last_reset_ns]
+        return segments
 
     def _flush_pending(self, master: int, limit: int) -> None:
         while self._pending:

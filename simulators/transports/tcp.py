@@ -118,11 +118,14 @@ class TcpServer:
             down = self.device.link_down(now)
             if down:
                 self._drop_client()
-            if self.device.resets != self._resets_seen:  # a reset emptied the FIFO
-                self._resets_seen = self.device.resets
-                self._pending.clear()
             self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
             segments = self.device.output_segments(now)
+            if self.device.resets != self._resets_seen:
+                # A reset empties what flow control held back (still in the device's FIFO).
+                self._resets_seen = self.device.resets
+                if len(self._pending) > HOST_SLACK:
+                    self._pending.clear()
+                    segments = [g for g in segments if g.end_ns >= self.device.last_reset_ns]
             if self._client is not None:
                 for seg in segments:
                     self._pending += seg.data
