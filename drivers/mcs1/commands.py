@@ -217,3 +217,33 @@ def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
         return Reply("data", text, None, bytes(line))
     expected = "OKAY, ERRORxx or WARNxx" + (f" or '{data_prefix} ...'" if data_prefix else "")
     raise ProtocolError(f"unexpected reply {line!r}: expected {expected}")
+
+
+def parse_conf(text: str) -> dict[str, str]:
+    """The fields of a ``CONF`` reply: verb -> the arguments that verb would take.
+
+    Parameters
+    ----------
+    text : str
+        Reply text, for example ``"CONF RATE=200000 CAMS=2 SLOT=100"``.
+
+    Returns
+    -------
+    dict of str to str
+        ``{"RATE": "200000", "CAMS": "2", "SLOT": "100"}``.
+
+    Raises
+    ------
+    ProtocolError
+        If the text is not ``CONF`` followed by ``VERB=ARGS`` words.
+    """
+    words = text.split(" ")
+    if not words or words[0] != "CONF":
+        raise ProtocolError(f"reply {text!r} to CONF does not start with 'CONF'")
+    fields: dict[str, str] = {}
+    for word in words[1:]:
+        verb, sep, args = word.partition("=")
+        if not sep or not verb.isalpha() or not verb.isupper():
+            raise ProtocolError(f"reply {text!r} to CONF: {word!r} is not VERB=ARGS")
+        fields[verb] = args
+    return fields
