@@ -21,6 +21,7 @@ from spotlab.console.calibration_inputs import (
     load_npz,
     load_recordings,
 )
+from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 
 
@@ -56,7 +57,7 @@ def _load(args: argparse.Namespace) -> WandObservations:
     path: Path = args.observations
     if not path.exists():
         raise CommandError(f"{path}: no such file")
-    suffix = path.suffix.lower()
+    suffix = input_suffix(path)
     if suffix == ".npz":
         return load_npz(path)
     if suffix == ".csv":

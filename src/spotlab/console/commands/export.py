@@ -23,6 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
 from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
@@ -109,7 +110,7 @@ def _outputs(args: argparse.Namespace) -> list[Path]:
 def _session_times(args: argparse.Namespace) -> dict[str, Any]:
     """--timestamps / --sync-report: the recording's time base; notes go to stderr."""
     path: Path = args.file
-    if path.suffix.lower() != ".spj":
+    if input_suffix(path) != ".spj":
         raise CommandError(f"{path}: --timestamps and --sync-report need a recording (.spj)")
     timebase = recording_timebase(path, parse_wiring(args.wiring))
     report = timebase.report()
@@ -131,7 +132,7 @@ def _session_times(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     outputs = _outputs(args)
     path: Path = args.file
-    suffix = path.suffix.lower()
+    suffix = input_suffix(path)
     if not path.is_file():
         raise CommandError(f"{path}: no such file")
     if args.timestamps is not None or args.sync_report is not None:
