@@ -181,6 +181,34 @@ def check_line(line: bytes) -> str | None:
     return text if text.isprintable() else None
 
 
+#: MCS-1 family codes (first word of the ``VER:0`` reply) and spotlab's driver families.
+FAMILY_NAMES = {"SPX": "selspot", "TMR": "timer", "CEN": "centroid"}
+
+
+class WrongFamilyError(ConfigurationError):
+    """A ``VER:0`` reply from a device of another MCS-1 family than the one expected.
+
+    Attributes
+    ----------
+    answered : str
+        The family code the device gave (``"SPX"``).
+    expected : str
+        The family code asked for.
+    text : str
+        The reply text.
+    """
+
+    def __init__(self, answered: str, expected: str, text: str, port: str = "") -> None:
+        self.answered, self.expected, self.text = answered, expected, text
+        family = FAMILY_NAMES.get(answered, answered)
+        where = f" on {port}" if port else ""
+        super().__init__(
+            f"the device{where} is a {family} device ({answered}), not a "
+            f"{FAMILY_NAMES.get(expected, expected)} one ({expected}): it answered VER:0 with "
+            f"{text!r}; use the {family} driver (--driver {family} or --device {family}=PORT)"
+        )
+
+
 def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
     """Parse one reply line (CRC and CR included).
 
@@ -201,6 +229,8 @@ def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
     ProtocolError
         If the line's CRC fails, or it is neither ``OKAY``, ``ERRORxx``,
         ``WARNxx`` nor the expected data reply; the message shows the bytes.
+    WrongFamilyError
+        If ``data_prefix`` is a family code and the reply is another family's ``VER:0``.
     """
     text = check_line(line)
     if text is None:
@@ -215,6 +245,9 @@ def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
             raise ProtocolError(f"reply {line!r} has a malformed {word} code")
     if data_prefix is not None and (text == data_prefix or text.startswith(data_prefix + " ")):
         return Reply("data", text, None, bytes(line))
+    word = text.split(" ", 1)[0]
+    if data_prefix in FAMILY_NAMES and word in FAMILY_NAMES:
+        raise WrongFamilyError(word, data_prefix, text)
     expected = "OKAY, ERRORxx or WARNxx" + (f" or '{data_prefix} ...'" if data_prefix else "")
     raise ProtocolError(f"unexpected reply {line!r}: expected {expected}")
 

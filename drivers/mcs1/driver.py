@@ -66,6 +66,9 @@ RECOVERY_RESET_WAIT = 0.5
 MIN_FRAME_WINDOW = 1 << 16
 #: A reply behind data frames is awaited at most this many reply timeouts in all.
 REPLY_BEHIND_DATA = 5
+#: Slowest streaming rate tried when a device does not answer at 9600 baud (it may have been
+#: left idle at a streaming rate by another program).
+MIN_LEFT_BAUD = 115_200
 #: Faults after which the driver tries to recover instead of raising.
 _TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
 
@@ -289,10 +292,16 @@ class Mcs1Driver(Driver):
             # killed before its STOP:), deaf to RESET: at 9600 where no BREAK reaches it
             # (pseudo-terminals, TCP).
             log.info("%s: no reset banner at 9600 baud; trying at %d", self.port, self.config.baud)
-            try:
-                self._channel.reset(min(wait, RECOVERY_RESET_WAIT), streaming_baud=self.config.baud)
-            except DeviceTimeout:
-                raise exc from None
+            # Or another program left it idle at its own streaming rate: try each rate the
+            # family knows, fastest first, from ours.
+            others = sorted((b for b in self.baud_codes if b >= MIN_LEFT_BAUD), reverse=True)
+            for baud in [self.config.baud, *(b for b in others if b != self.config.baud)]:
+                try:
+                    self._channel.reset(min(wait, RECOVERY_RESET_WAIT), streaming_baud=baud)
+                    return
+                except DeviceTimeout:
+                    continue
+            raise exc from None
 
     def _configure_and_start(self) -> None:
         c = self.config
