@@ -66,9 +66,6 @@ RECOVERY_RESET_WAIT = 0.5
 MIN_FRAME_WINDOW = 1 << 16
 #: A reply behind data frames is awaited at most this many reply timeouts in all.
 REPLY_BEHIND_DATA = 5
-#: Slowest streaming rate tried when a device does not answer at 9600 baud (it may have been
-#: left idle at a streaming rate by another program).
-MIN_LEFT_BAUD = 115_200
 #: Faults after which the driver tries to recover instead of raising.
 _TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
 
@@ -219,15 +216,18 @@ class Mcs1Driver(Driver):
         """Read the device's configuration (``CONF:``) and keep it for every setting the
         user did not give; once, at the first start (a reconnection sends the same).
 
-        A device that does not know ``CONF:`` (``ERROR01``) keeps the driver's defaults.
+        A device that does not know ``CONF:`` (``ERROR01``, or a bare ``OKAY``) gets the
+        driver's defaults.
         """
         if not self._adopt_pending:
             return
         try:
-            reply = self._channel.transact("CONF", data_prefix="CONF")
+            reply: Reply | None = self._channel.transact("CONF", data_prefix="CONF")
         except DeviceError as exc:
             if exc.code != 0x01:
                 raise
+            reply = None
+        if reply is None or reply.kind != "data":  # ERROR01 (unknown verb), or a bare OKAY
             log.warning(
                 "%s: the device does not report its configuration (CONF:); %s take the "
                 "driver's defaults",
@@ -292,16 +292,10 @@ class Mcs1Driver(Driver):
             # killed before its STOP:), deaf to RESET: at 9600 where no BREAK reaches it
             # (pseudo-terminals, TCP).
             log.info("%s: no reset banner at 9600 baud; trying at %d", self.port, self.config.baud)
-            # Or another program left it idle at its own streaming rate: try each rate the
-            # family knows, fastest first, from ours.
-            others = sorted((b for b in self.baud_codes if b >= MIN_LEFT_BAUD), reverse=True)
-            for baud in [self.config.baud, *(b for b in others if b != self.config.baud)]:
-                try:
-                    self._channel.reset(min(wait, RECOVERY_RESET_WAIT), streaming_baud=baud)
-                    return
-                except DeviceTimeout:
-                    continue
-            raise exc from None
+            try:
+                self._channel.reset(min(wait, RECOVERY_RESET_WAIT), streaming_baud=self.config.baud)
+            except DeviceTimeout:
+                raise exc from None
 
     def _configure_and_start(self) -> None:
         c = self.config
@@ -368,6 +362,10 @@ class Mcs1Driver(Driver):
         try:
             self._link.write(encode_command("STOP"))
             self._await_event_reply("STOP:", okay_only=True)
+            # Leave the device as it powers up (9600 baud, its defaults), where the next
+            # program (another driver, `spotlab devices --probe`) finds it.
+            self._link.write(encode_command("RESET"))
+            self._link.set_baud(RESET_BAUD)
         except DeviceDisconnected as exc:
             log.warning("%s: port lost while stopping: %s", self.port, exc)
         self._tap_event("stopped")
