@@ -301,14 +301,13 @@ class Mcs1Driver(Driver):
         c = self.config
         reply = self._channel.negotiate(c.baud, self.family_code, self.baud_codes)
         self._tap_event("baud_change", baud=c.baud)
-        self._check_device(reply)
-        if self._adopt_pending:
+        if self._adopt_pending:  # the family was checked by negotiate (VER:0)
             self._adopt_device_config()
             if self.config.baud != c.baud:  # "auto" for the device's own rate
                 reply = self._channel.negotiate(self.config.baud, self.family_code, self.baud_codes)
                 self._tap_event("baud_change", baud=self.config.baud)
             c = self.config
-            self._check_device(reply)
+        self._check_device(reply)
         for verb, args in c.commands():
             self._channel.transact(verb, args)
         self._tap_event("configured", config=c.to_dict())
