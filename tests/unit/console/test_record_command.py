@@ -8,6 +8,10 @@ the pseudo-terminal runs are in tests/hil/test_e2e_lab.py.
 from __future__ import annotations
 
 import json
+import os
+import signal
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -211,3 +215,35 @@ def test_load_lab_resolves_paths_against_the_file(tmp_path: Path) -> None:
     assert lab.devices[0].settings == {} and lab.wiring == {}
     with pytest.raises(LabFileError, match="cannot read"):
         load_lab(tmp_path / "missing.toml")
+
+
+def test_ctrl_c_ends_an_open_ended_recording_with_its_summary(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No --seconds: SIGINT (Ctrl-C) once frames are in the file is a deliberate stop."""
+    out = tmp_path / "rec.spj"
+    seen: list[int] = []
+
+    def interrupt_when_recorded() -> None:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if out.exists() and out.stat().st_size > 20_000:  # a few hundred 1 x 8 frames
+                seen.append(out.stat().st_size)
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=interrupt_when_recorded)
+    thread.start()
+    try:
+        code = main(["record", "sim://selspot?seed=2", "--driver", "selspot", "--out", str(out)])
+    finally:
+        thread.join()
+    captured = capsys.readouterr()
+    assert seen and code == 0, captured.err
+    assert "error" not in captured.err
+    (line,) = captured.out.splitlines()
+    frames = int(line.split(": ")[1].split(" frames")[0])
+    (stream,) = _info(capsys, out)["streams"]
+    assert frames == stream["frames"] > 100 and stream["lost_frames"] == 0
+    assert JournalReader(out).complete
