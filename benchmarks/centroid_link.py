@@ -4,7 +4,8 @@ Starts ``spotlab sim centroid --pty`` and ``spotlab record`` as separate process
 (as a lab runs them), records ``--seconds`` and prints one JSON object per line
 and configuration: frames recorded, frames lost on the link, frames the hub's
 FIFO dropped (whole frames, flagged), CRC errors, resynchronisations, reconnects,
-the data rate, and the machine's load average over the run. No fault is injected:
+the data rate, the CPU time the simulator and the recorder each used per second
+recorded (cores), and the machine's load average over the run. No fault is injected:
 a clean link loses nothing on the wire; a host that falls behind sees only whole
 frames dropped by the device (flow control, docs/protocols/mcs1.md §4).
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -28,6 +30,18 @@ from pathlib import Path
 
 def _spotlab(*args: object) -> list[str]:
     return [sys.executable, "-m", "spotlab.console.cli", *map(str, args)]
+
+
+def _children_cpu_s() -> float:
+    """User + system CPU seconds of this process's finished children."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _proc_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a running process (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[str, object]:
@@ -46,6 +60,8 @@ def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[st
                 time.sleep(0.05)
             port = out.read_text().split()[0]
             load0 = os.getloadavg()[0]
+            cpu0 = _children_cpu_s()
+            sim_cpu0 = _proc_cpu_s(sim.pid)
             rec = subprocess.run(
                 _spotlab("record", "--device", f"centroid={port}", "--cameras", cameras,
                          "--rate", rate, "--seconds", seconds, "--out", Path(tmp) / "run.spj",
@@ -53,6 +69,8 @@ def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[st
                 capture_output=True, text=True, timeout=seconds + 60,
             )  # fmt: skip
             load1 = os.getloadavg()[0]
+            sim_cpu = _proc_cpu_s(sim.pid) - sim_cpu0
+            rec_cpu = _children_cpu_s() - cpu0
         finally:
             sim.terminate()
             try:
@@ -63,6 +81,8 @@ def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[st
     row: dict[str, object] = {
         "bench": "centroid_link", "cameras": cameras, "markers": markers, "rate_hz": rate,
         "seconds": seconds, "exit": rec.returncode, "load_1min": [load0, load1],
+        "cpu_s_per_s": {"simulator": round(sim_cpu / seconds, 3),
+                        "record": round(rec_cpu / seconds, 3)},
     }  # fmt: skip
     if rec.returncode != 0 or not rec.stdout.strip():
         row["error"] = rec.stderr.strip().splitlines()[-1:] or ["no output"]

@@ -5,9 +5,11 @@ Prints one JSON object per seed. Scene (issue 6): the video-centroid simulator
 40-marker walking body with body-segment occlusion, merged blobs, floor-reflection
 ghosts, noise blobs) run in process and decoded by the host driver
 (:func:`spotlab.testing.centroid_scene.centroid_scene`), so the blobs are those a
-recording holds. The marker model is learnt from the truth of a separate
-range-of-motion trial (the first ``--train`` seconds of the same body, 2 strides):
-rigid clusters and distance links (:meth:`MarkerModel.infer`).
+recording holds. Each seed is a subject (size, speed, marker placement, soft tissue).
+The marker model is learnt, with :meth:`MarkerModel.infer`'s defaults, from other
+frames of the same subject: the ``--train`` seconds of its walk after the scored part
+(out of sample in time; a new subject's model comes from a template, see
+docs/identification.md).
 
 Figures (marker-frames; "possible" = two or more of the marker's own unmerged blobs,
 what correctly matched blobs can reconstruct):
@@ -68,8 +70,9 @@ def run(args: argparse.Namespace, seed: int) -> dict:
         shape = scene.markers_mm.shape[:2]
         scene = scene.hidden(dropouts(shape, args.dropouts, rate, seed))
     generated = time.perf_counter() - start
-    training = centroid_scene(train_s, rate, seed=seed + 1000)
-    model = MarkerModel.infer(training.labels, training.markers_mm, link_spread_mm=50.0)
+    # The same subject (each seed is one), other frames: the walk after the scored part.
+    training = centroid_scene(seconds + train_s, rate, seed=seed, ghost_rate=0.0)
+    model = MarkerModel.infer(training.labels, training.markers_mm[round(seconds * rate) :])
     identify = Identifier(scene.rig, model)
     F, M = scene.markers_mm.shape[:2]
     points = np.full((F, M, 3), np.nan)

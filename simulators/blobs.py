@@ -5,7 +5,9 @@ Per camera and exposure: markers are projected through the camera model
 physical size and distance (``f * d / z``); a marker is hidden when it is
 behind the camera, outside the image, or a body capsule it is not on crosses
 its line of sight. Discs closer than the sum of their radii merge into one
-blob (area-weighted centroid of the union, ``merged`` flag). Reflections are
+blob (area-weighted centroid of the union); the hub flags a blob ``merged`` from its
+measured shape (elongation), so nearly coincident markers pass as one round blob and
+a small single blob is now and then flagged, as on real hardware. Reflections are
 ghost blobs: the floor (z = 0) mirror image of a marker, dimmer, seen by a
 fixed, seeded fraction of (camera, marker) pairs. Random noise blobs, and
 sunlight (thousands of bright blobs) on demand. Centroids get Gaussian noise;
@@ -56,6 +58,13 @@ class BlobModel:
         Mean random noise blobs per camera and frame (Poisson).
     peak_at_4m : float
         Peak grey level of a marker 4 m away (1/z^2 beyond); above 255 saturates.
+    merge_elongation : float
+        The hub flags a blob merged when its measured elongation (ratio of its
+        principal axes) exceeds this.
+    shape_noise : float
+        Noise of the measured elongation times the blob's diameter (px): the
+        elongation of a ``d``-pixel blob is measured up to ``|N(0, 1)| shape_noise / d``
+        too long.
     """
 
     marker_diameter_mm: float = 14.0
@@ -64,6 +73,8 @@ class BlobModel:
     ghost_gain: float = 0.35
     noise_blobs: float = 0.02
     peak_at_4m: float = 200.0
+    merge_elongation: float = 1.3
+    shape_noise: float = 0.3
 
 
 @dataclass
@@ -298,19 +309,23 @@ def render_cameras(
         e_kind = np.where(is_noise, KIND_NOISE, KIND_SUN).astype(np.int8)
         kind = np.concatenate([kind, e_kind])[order]
     area = np.maximum(np.pi * d * d / 4, 1.0)
-    flags = np.zeros(cam_of.size, dtype=np.uint8)
-    cols = _merge_many(n, cam_of, true_uv, d, pk, area, marker, kind, flags, seen)
+    cols = _merge_many(n, cam_of, true_uv, d, pk, area, marker, kind, seen)
     return _finish_many(cams, *cols, seen, model, rng)
 
 
-_Cols = tuple[I64, F64, F64, F64, F64, I64, npt.NDArray[np.int8], npt.NDArray[np.uint8]]
+#: camera, centroid (px), diameter (px), peak, area (px), marker, kind, elongation
+_Cols = tuple[I64, F64, F64, F64, F64, I64, npt.NDArray[np.int8], F64]
 
 
 def _merge_many(
     n: int, cam_of: I64, uv: F64, d: F64, pk: F64, area: F64, marker: I64,
-    kind: npt.NDArray[np.int8], flags: npt.NDArray[np.uint8], seen: npt.NDArray[np.int8],
+    kind: npt.NDArray[np.int8], seen: npt.NDArray[np.int8],
 ) -> _Cols:  # fmt: skip
-    """Blobs whose discs overlap become one (area-weighted centroid, merged flag).
+    """Blobs whose discs overlap become one (area-weighted centroid).
+
+    A blob's elongation is the square root of the ratio of the principal second
+    moments of its shape: 1 for a disc; for two equal discs ``s`` apart,
+    ``sqrt(1 + (2 s / d)^2)``.
 
     Discs are tested pairwise within each camera (one padded test for all cameras);
     the blobs that touch, directly or through others, form one blob. Images with more
@@ -320,7 +335,7 @@ def _merge_many(
     counts = np.bincount(cam_of, minlength=n)
     starts = np.concatenate([[0], np.cumsum(counts)])
     todo = np.flatnonzero((counts > 1) & (counts <= MERGE_LIMIT))
-    cols: _Cols = (cam_of, uv, d, pk, area, marker, kind, flags)
+    cols: _Cols = (cam_of, uv, d, pk, area, marker, kind, np.ones(cam_of.size))
     if todo.size == 0:
         return cols
     slot = np.arange(int(counts[todo].max()))
@@ -354,25 +369,41 @@ def _merge_many(
     out_kind = np.where(merged, KIND_MERGED, kind[first]).astype(np.int8)
     members = (marker >= 0) & merged[label]
     seen[cam_of[members], marker[members]] = IN_MERGED
-    out_flags = np.where(merged, MERGED, 0).astype(np.uint8)
+    # Second moments of each union of discs (a disc of radius r: r^2 / 4 per axis).
+    du, dv = (uv - out_uv[label]).T
+    r2 = d * d / 16.0
+    mxx = np.bincount(label, area * (r2 + du * du), ncomp) / wsum
+    myy = np.bincount(label, area * (r2 + dv * dv), ncomp) / wsum
+    mxy = np.bincount(label, area * du * dv, ncomp) / wsum
+    half = np.hypot(0.5 * (mxx - myy), mxy)
+    mid = 0.5 * (mxx + myy)
+    elong = np.sqrt((mid + half) / np.maximum(mid - half, 1e-12))
     out_d = np.asarray(2 * np.sqrt(wsum / np.pi), np.float64)
     head = (cam_of[first], out_uv, out_d, out_pk, np.asarray(wsum, np.float64), out_marker)
-    return (*head, out_kind, out_flags)
+    return (*head, out_kind, np.asarray(elong, np.float64))
 
 
 def _finish_many(
     cams: list[Camera], cam_of: I64, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
-    kind: npt.NDArray[np.int8], flags: npt.NDArray[np.uint8], seen: npt.NDArray[np.int8],
+    kind: npt.NDArray[np.int8], elong: F64, seen: npt.NDArray[np.int8],
     model: BlobModel, rng: np.random.Generator,
 ) -> list[CameraBlobs]:  # fmt: skip
-    """Noise, flags and scan order (top row first), then one :class:`CameraBlobs` per camera."""
+    """Noise, flags and scan order (top row first), then one :class:`CameraBlobs` per camera.
+
+    The hub flags a blob ``MERGED`` from its shape, as real hardware does: when its
+    measured elongation exceeds :attr:`BlobModel.merge_elongation`. The measurement
+    is noisier the smaller the blob (``shape_noise / d``), so two markers that
+    nearly coincide pass as one round blob and a small single blob is now and then
+    flagged; the truth's ``kind`` says what each blob really is.
+    """
     n = len(cams)
     size = np.array([c.size for c in cams], dtype=np.float64)[cam_of] - 1  # (N, 2)
     r = d / 2
     noisy = np.clip(true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape), 0, size)
     edge = (true_uv - r[:, None] < 0).any(axis=1) | (true_uv + r[:, None] > size).any(axis=1)
+    measured = elong + np.abs(rng.normal(0.0, 1.0, elong.shape)) * model.shape_noise / d
     flags = (
-        flags
+        np.where(measured > model.merge_elongation, MERGED, 0).astype(np.uint8)
         | np.where(edge, EDGE, 0).astype(np.uint8)
         | np.where(pk > 255, SATURATED, 0).astype(np.uint8)
     )

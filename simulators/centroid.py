@@ -242,7 +242,7 @@ class CentroidDevice(SelspotDevice):
         if markers < 1:
             raise ValueError(f"markers must be >= 1, got {markers}")
         self.model = model if model is not None else BlobModel()
-        self.body = GaitBody()
+        self.body = GaitBody.for_seed(seed)
         self.n_markers = markers
         self.labels = (self.body.labels + reference_markers(max(markers - 40, 0), seed).labels)[
             :markers

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from spotlab.io import read_c3d
+
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
@@ -395,21 +397,15 @@ def from_c3d(path: str | Path, *, center: bool = True, loop: bool = True) -> Sam
     ------
     ValueError
         If the file holds no 3-D points.
+    spotlab.io.FileFormatError
+        If the file cannot be read as C3D (the message names the file and the cause).
     """
-    import c3d  # optional dependency: spotlab[c3d]
-
-    with open(path, "rb") as fh:
-        reader = c3d.Reader(fh)
-        rate = float(reader.point_rate)
-        labels = [str(s).strip() for s in reader.point_labels]
-        units = reader.get("POINT:UNITS")
-        unit = units.string_value.strip().lower() if units is not None else "mm"
-        frames = [pts[:, :4].copy() for _, pts, _ in reader.read_frames(copy=True)]
-    if not frames or frames[0].shape[0] == 0:
+    trial = read_c3d(path)
+    if trial.n_frames == 0 or trial.n_markers == 0:
         raise ValueError(f"{path}: no 3-D points in this C3D file")
-    data = np.stack(frames).astype(np.float64)
-    xyz = data[..., :3] * {"m": 1000.0, "cm": 10.0}.get(unit, 1.0)
-    xyz[data[..., 3] < 0] = np.nan
+    if trial.units != "mm":
+        raise ValueError(f"{path}: points in {trial.units!r}, a unit that cannot be converted")
+    rate, labels, xyz = trial.point_rate, trial.labels, trial.points.copy()
     if center and np.isfinite(xyz).any():
         xyz[..., :2] -= np.nanmean(xyz[..., :2].reshape(-1, 2), axis=0)
     times = np.arange(xyz.shape[0]) / rate

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import datetime
 import importlib
+import os
 import threading
 import time
 from collections.abc import Sequence
@@ -101,6 +102,7 @@ class FakeDepthai:
     """
 
     def __init__(self, boards: Sequence[FakeBoard]) -> None:
+        os.environ.setdefault("DEPTHAI_LEVEL", "error")  # as depthai_module() does
         self._dai = importlib.import_module("depthai")
         self.boards = list(boards)
         fake = self

@@ -5,8 +5,9 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import NoReturn
 
 import pytest
 
@@ -66,10 +67,41 @@ def no_leaks() -> Iterator[None]:
         pytest.fail("; ".join(problems), pytrace=False)
 
 
+#: The reference data (../shared/data, or $SPOTLAB_SHARED_DATA where it lives elsewhere).
+SHARED_DATA = Path(os.environ.get("SPOTLAB_SHARED_DATA") or SHARED / "data")
+
+
+def in_ci() -> bool:
+    """True under continuous integration (``CI`` set to true, as CI services do)."""
+    return os.environ.get("CI", "").strip().lower() in ("1", "true", "yes")
+
+
+def missing_reference(what: str) -> NoReturn:
+    """Skip a reference test whose data is missing, but fail it under CI.
+
+    A reference test that skips there is a test that silently stopped running.
+    """
+    if in_ci():
+        pytest.fail(f"{what} not found: reference tests must run in CI", pytrace=False)
+    pytest.skip(f"{what} not found")
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
-    """The shared data folder beside the project (../shared/data)."""
-    path = SHARED / "data"
-    if not path.is_dir():
-        pytest.skip(f"shared data not found at {path}")
-    return path
+    """The shared reference data folder (../shared/data); fails under CI when missing."""
+    if not SHARED_DATA.is_dir():
+        missing_reference(f"shared data folder {SHARED_DATA}")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def shared_file(shared_data: Path) -> Callable[[str], Path]:
+    """``shared_file("folder/name")``: a file of the shared data (fails under CI if missing)."""
+
+    def get(relative: str) -> Path:
+        path = shared_data / relative
+        if not path.exists():
+            missing_reference(str(path))
+        return path
+
+    return get

@@ -61,6 +61,9 @@ log = logging.getLogger(__name__)
 RETRY_INTERVAL = 0.05
 #: Longest wait for the banner while recovering (s): a returning device answers in ms.
 RECOVERY_RESET_WAIT = 0.5
+#: Silence (no byte at all) after which a streaming device counts as gone (s): a device
+#: at 50 Hz and up sends every 20 ms; a busy host may not read for a few hundred ms.
+SILENCE_S = 1.0
 #: Bytes (at least) that may arrive without a valid frame before the link counts as garbage
 #: (one longest MCS-1 frame).
 MIN_FRAME_WINDOW = 1 << 16
@@ -189,7 +192,7 @@ class Mcs1Driver(Driver):
     def _retime(self, config: Mcs1Config) -> None:
         """Silence and flush thresholds of ``config``'s frame rate and size."""
         period_s = 1.0 / config.rate_hz
-        self._silence_ns = int(max(0.5, 20 * period_s) * 1e9)
+        self._silence_ns = int(max(SILENCE_S, 20 * period_s) * 1e9)
         send_s = config.frame_bytes * 10 / config.baud
         self._idle_flush_ns = int(max(0.05, 3 * send_s) * 1e9)
         self._last_frame_ns = 0
@@ -367,7 +370,18 @@ class Mcs1Driver(Driver):
             self._link.set_baud(RESET_BAUD)
         except DeviceDisconnected as exc:
             log.warning("%s: port lost while stopping: %s", self.port, exc)
+        except DeviceTimeout as exc:
+            # What was recorded stays good; the next start resets the device anyway.
+            log.warning("%s: %s; the stream may still run", self.port, exc)
+            self._tap_event("stop_unconfirmed", reason=str(exc))
+            return
         self._tap_event("stopped")
+
+    def drain(self) -> list[FrameBlock]:
+        """Frames decoded but not yet returned by :meth:`recv` (those that arrived while
+        the driver waited for its reply to ``STOP:``), handed over once."""
+        blocks, self._stash = self._stash, []
+        return blocks
 
     def _await_event_reply(self, command: str, okay_only: bool = False) -> Reply:
         """Decode frames until the reply's event frame; keep the frames for ``recv``.

@@ -1,8 +1,8 @@
 """A serial link: pyserial's ``serial_for_url`` with clear errors and arrival stamps.
 
 Any pyserial URL works: a device path (``/dev/ttyUSB0``, a pseudo-terminal),
-``socket://host:port``, ``spy://...``, and ``sim://...`` once the simulator
-package has registered its handler in ``serial.protocol_handler_packages``.
+``socket://host:port``, ``spy://...``, and ``sim://...`` (the simulator's handler,
+which pyserial imports by name the first time such a URL is opened).
 Every chunk read is stamped with ``time.monotonic_ns()`` as the read returns and
 handed to ``on_rx``; every write to ``on_tx`` (the driver's wire taps).
 
@@ -63,7 +63,7 @@ def open_error(url: str, exc: BaseException) -> DeviceError | ConfigurationError
         return ConfigurationError(
             f"cannot open {url!r}: pyserial has no handler for '{scheme}://' URLs"
             + (
-                " (the simulator registers sim:// when spotlab.simulators is imported)"
+                " (the simulators' package, spotlab.simulators, serves sim://)"
                 if scheme == "sim"
                 else ""
             )
@@ -82,6 +82,17 @@ def open_error(url: str, exc: BaseException) -> DeviceError | ConfigurationError
     if code in _BUSY:
         return DeviceError(f"{url} is in use by another program: {exc}")
     return DeviceError(f"cannot open {url}: {exc}")
+
+
+#: Where pyserial finds the ``sim://`` handler (``protocol_sim``): imported by pyserial
+#: only when such a URL is opened, so production code never imports the simulators.
+SIM_HANDLERS = "spotlab.simulators.transports"
+
+
+def _register_simulators() -> None:
+    """Let pyserial find the simulator's ``sim://`` handler (on demand, by name)."""
+    if SIM_HANDLERS not in serial.protocol_handler_packages:
+        serial.protocol_handler_packages.append(SIM_HANDLERS)
 
 
 class SerialLink:
@@ -138,6 +149,8 @@ class SerialLink:
             return
         try:
             if self._port_obj is None:
+                if self.url.startswith("sim://"):
+                    _register_simulators()
                 ser = serial.serial_for_url(self.url, do_not_open=True)
                 ser.write_timeout = 2.0
                 if "://" not in self.url:

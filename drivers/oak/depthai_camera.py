@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import importlib
+import os
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,9 @@ HELD = "X_LINK_BOOTED"
 
 def depthai_module() -> Any:
     """depthai, imported on first use, with a clear error when it is missing."""
+    # depthai's own logger prints warnings (such as "USB protocol not available")
+    # on the user's terminal at import; errors only unless DEPTHAI_LEVEL says otherwise.
+    os.environ.setdefault("DEPTHAI_LEVEL", "error")
     try:
         return importlib.import_module("depthai")
     except ImportError as exc:

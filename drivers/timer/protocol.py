@@ -287,6 +287,8 @@ class TimerDecoder:
         self, frames: npt.NDArray[Any]
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8]]:
         f, e = frames.shape[0], self.slots
+        if f == 0:  # every frame of the batch was dropped (a header contradicting E)
+            return np.full((0, e + 1, 1, len(VALUES)), np.nan), np.zeros((0, e + 1, 1), np.uint8)
         rec = frames["records"]
         used = np.arange(e)[None, :] < frames["n_items"][:, None]
         data = np.full((f, e + 1, 1, len(VALUES)), np.nan)

@@ -41,6 +41,8 @@ MAX_WAIT_S = 0.05
 #: Bytes an adapter and the host's driver take in before flow control holds the device
 #: back (what waits beyond this counts against the device's FIFO).
 HOST_SLACK = 1 << 16
+#: Longest stretch of device time simulated between two writes to the port (ns).
+CATCH_UP_NS = 20_000_000
 
 
 def tty_baud(fd: int) -> int | None:
@@ -161,8 +163,13 @@ class PtyServer:
 
     # -- serving -----------------------------------------------------------------
     def _run(self) -> None:
+        served: int | None = None
         while not self._stop.is_set():
-            now = time.monotonic_ns()
+            # A device that fell behind (its host is busy) catches up in steps, its
+            # bytes written between them, as a real one sends while it works.
+            real = time.monotonic_ns()
+            now = real if served is None else min(real, served + CATCH_UP_NS)
+            served = now
             if self.device.link_down(now):
                 if self._master is not None:
                     self._close_pty()
@@ -179,9 +186,9 @@ class PtyServer:
             if self._master is None:
                 self._open_pty()
                 self.stats["reconnects"] += 1
-            self._serve_once(now)
+            self._serve_once(now, behind=now < real)
 
-    def _serve_once(self, now: int) -> None:
+    def _serve_once(self, now: int, behind: bool = False) -> None:
         master = self._master
         assert master is not None
         host_baud = tty_baud(master)
@@ -198,6 +205,8 @@ class PtyServer:
         self.device.host_backlog = max(0, len(self._pending) - HOST_SLACK)
         nxt = self.device.next_event_ns()
         wait = MAX_WAIT_S if nxt is None else min(max((nxt - now) / 1e9, MIN_WAIT_S), MAX_WAIT_S)
+        if behind:
+            wait = 0.0
         writers = [master] if self._pending else []
         readable, _, _ = select.select([master, self._wake_r], writers, [], wait)
         if master in readable:

@@ -3,24 +3,40 @@
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from spotlab.core import (
-    ConfigurationError,
-    DeviceError,
-    Frame,
-    FrameBlock,
-    ProtocolError,
-    RecordingError,
-    SpotlabError,
-    StreamSpec,
-)
-
 if TYPE_CHECKING:
+    from spotlab.core import (
+        ConfigurationError,
+        DeviceError,
+        Frame,
+        FrameBlock,
+        ProtocolError,
+        RecordingError,
+        SpotlabError,
+        StreamSpec,
+    )
     from spotlab.geometry import Camera, Rig
 
 __version__ = "0.1.0"
 
-# Numerics load scipy: imported on first use so that `import spotlab` stays light.
-_LAZY = {"Camera": "spotlab.geometry", "Rig": "spotlab.geometry"}
+# Loaded on first use so that `import spotlab` stays light (no numpy, no scipy):
+# `spotlab --version` and a Ctrl-C at start-up need nothing more.
+_LAZY = {
+    "Camera": "spotlab.geometry",
+    "Rig": "spotlab.geometry",
+    **dict.fromkeys(
+        (
+            "ConfigurationError",
+            "DeviceError",
+            "Frame",
+            "FrameBlock",
+            "ProtocolError",
+            "RecordingError",
+            "SpotlabError",
+            "StreamSpec",
+        ),
+        "spotlab.core",
+    ),
+}
 
 
 def __getattr__(name: str) -> Any:

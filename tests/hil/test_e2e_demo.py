@@ -24,8 +24,10 @@ def test_demo_runs_and_every_check_holds(tmp_path: Path) -> None:
     stream = summary["streams"][0]
     for key in ("frames", "lost_frames", "device_dropped", "duplicates", "crc_errors"):
         assert stream[key] == report["recording"][key], key
-    # The recording reconstructed with the simulator's true rig and exported as C3D; the
-    # floor's reflections bias PSD readings by tens of mm (docs/simulators.md).
+    # The recording reconstructed with the simulator's true rig and exported as C3D, on a
+    # dark floor: about 2 mm RMS from the PSD noise (1.97 mm measured for 6 s); the
+    # demo's own verdict checks it (checks["accurate_reconstruction"], 3 mm).
     rec = report["reconstruction"]
-    assert rec["markers_reconstructed"] > 0 and Path(rec["c3d"]).stat().st_size > 0
-    assert rec["error_rms_mm"] < 100.0
+    assert rec["markers_reconstructed"] == 32 and Path(rec["c3d"]).stat().st_size > 0
+    assert 1.0 < rec["error_rms_mm"] < 3.0, rec
+    assert report["checks"]["accurate_reconstruction"]

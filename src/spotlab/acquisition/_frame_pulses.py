@@ -9,15 +9,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import minimum_filter1d
 from scipy.stats import theilslopes
 
-if TYPE_CHECKING:
-    from spotlab.acquisition.timebase import DeviceFrames, TimerFrames
+from spotlab.acquisition.recorded_frames import DeviceFrames, TimerFrames
 
 I64 = npt.NDArray[np.int64]
 F64 = npt.NDArray[np.float64]

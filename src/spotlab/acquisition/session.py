@@ -37,6 +37,7 @@ from spotlab.core.errors import (
     ProtocolError,
     SpotlabError,
 )
+from spotlab.core.frames import FrameBlock
 from spotlab.core.wire import WireTap
 
 __all__ = [
@@ -406,11 +407,15 @@ class Session:
                 continue
             if block is None or not len(block):
                 continue
-            self._frames[name] += len(block)
-            for sink, channel, lock in inline:
-                self._call_inline(sink.on_block, name, block, channel, lock, error=False)
-            for channel in channels:
-                channel.put_block(name, block)
+            self._deliver(name, block)
+
+    def _deliver(self, name: str, block: FrameBlock) -> None:
+        """Hand one block of device ``name`` to every sink."""
+        self._frames[name] += len(block)
+        for sink, channel, lock in self._inline:
+            self._call_inline(sink.on_block, name, block, channel, lock, error=False)
+        for channel in self._queued:
+            channel.put_block(name, block)
 
     @staticmethod
     def _call_inline(
@@ -477,6 +482,12 @@ class Session:
                     )
         for device in self._started:
             self._collect(errors, device.stop)
+            # Frames that arrived before the device's reply to its stop command: the
+            # recording holds them, so the sinks get them too (live equals replay).
+            drain = getattr(device, "drain", None)
+            for block in drain() if callable(drain) else ():
+                if len(block):
+                    self._deliver(device.name, block)
         for channel in self._channels:
             channel.close()
         for thread in self._dispatchers:

@@ -41,6 +41,7 @@ from spotlab.acquisition._frame_pulses import (
     pulsed_device,
 )
 from spotlab.acquisition.clocks import ClockModel, dejitter_arrivals, fit_edges
+from spotlab.acquisition.recorded_frames import DeviceFrames, TimerFrames
 from spotlab.acquisition.synchroniser import sample_times
 from spotlab.core.errors import ClockError, SynchronisationError
 from spotlab.core.streams import StreamSpec
@@ -53,57 +54,6 @@ B = npt.NDArray[np.bool_]
 TIMER_TICK_HZ = 1e7
 #: Per-frame ``method`` codes of :class:`StreamTiming`.
 METHODS = ("reference", "edge", "model", "extrapolated", "arrivals")
-
-
-@dataclass(frozen=True)
-class DeviceFrames:
-    """The frames of one recorded device stream (input of :func:`session_timebase`).
-
-    Attributes
-    ----------
-    name : str
-        Stream name.
-    seq : ndarray of int64, shape (F,)
-        Unwrapped sequence numbers (a new run starts at a new multiple of 65536).
-    ticks : ndarray of int64, shape (F,)
-        Unwrapped device ticks.
-    arrival_ns : ndarray of int64, shape (F,)
-        Host arrival stamps, ns.
-    spec : StreamSpec
-        The stream's spec (tick rate, frame rate, slots).
-    """
-
-    name: str
-    seq: I64
-    ticks: I64
-    arrival_ns: I64
-    spec: StreamSpec
-
-
-@dataclass(frozen=True)
-class TimerFrames:
-    """A recorded timer stream: its frames and the edges they carried.
-
-    Attributes
-    ----------
-    name : str
-        Stream name.
-    seq, ticks, arrival_ns : ndarray of int64, shape (F,)
-        Timer frames: seq, counter at the frame (10 MHz), host arrival (ns).
-    edge_input, edge_index, edge_tick : ndarray of int64, shape (K,)
-        Edges: channel, edge number of the channel, counter at the edge.
-    edge_rising : ndarray of bool, shape (K,)
-        Rising edge.
-    """
-
-    name: str
-    seq: I64
-    ticks: I64
-    arrival_ns: I64
-    edge_input: I64
-    edge_index: I64
-    edge_tick: I64
-    edge_rising: B
 
 
 @dataclass

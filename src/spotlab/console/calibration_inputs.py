@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.console.errors import CommandError
+from spotlab.console.npz import number, numeric_array, read_npz
 from spotlab.console.recorded_observations import PSD_IMAGE_SIZE, read_selspot, usable_counts
 from spotlab.console.tables import camera_count as _cameras
 from spotlab.console.tables import column as _column
@@ -61,21 +62,17 @@ class WandObservations:
 
 def load_npz(path: Path) -> WandObservations:
     """Read an npz file of arrays (see the module docstring)."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise CommandError(f"{path}: not a readable npz file ({exc})") from None
+    arrays = read_npz(path)
     missing = {"wand", "frame", "frame_points", "image_size"} - set(arrays)
     if missing:
         raise CommandError(f"{path}: missing array(s) {', '.join(sorted(missing))}")
     names = [str(n) for n in arrays["names"]] if "names" in arrays else None
-    length = float(arrays["wand_length"]) if "wand_length" in arrays else None
+    length = number(path, "wand_length", arrays["wand_length"]) if "wand_length" in arrays else None
     return WandObservations(
-        wand=np.asarray(arrays["wand"], dtype=np.float64),
-        frame=np.asarray(arrays["frame"], dtype=np.float64),
-        frame_points=np.asarray(arrays["frame_points"], dtype=np.float64),
-        image_size=np.asarray(arrays["image_size"], dtype=np.float64),
+        wand=numeric_array(path, "wand", arrays["wand"]),
+        frame=numeric_array(path, "frame", arrays["frame"]),
+        frame_points=numeric_array(path, "frame_points", arrays["frame_points"]),
+        image_size=numeric_array(path, "image_size", arrays["image_size"]),
         names=names,
         wand_length=length,
     )

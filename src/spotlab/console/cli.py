@@ -19,31 +19,52 @@ from spotlab.console.errors import (
     CommandError,
     report,
 )
-from spotlab.core.errors import SpotlabError
 
-# Modules of spotlab.console.commands, each with add_parser(subparsers) and run(args).
-COMMANDS: tuple[str, ...] = (
-    "devices",
-    "sim",
-    "record",
-    "info",
-    "replay",
-    "calibrate",
-    "reconstruct",
-    "export",
-    "demo",
-    "udev",
-)
+# Modules of spotlab.console.commands, each with add_parser(subparsers) and run(args),
+# with the one-line help ``spotlab --help`` shows for them. Only the module of the
+# command that runs is imported (its imports take seconds: numpy, scipy, matplotlib);
+# the others appear in ``spotlab --help`` by this line alone (tests/unit/console check
+# that it is the one their add_parser gives).
+COMMANDS: dict[str, str] = {
+    "devices": "list serial ports and, with --probe, the devices that answer on them",
+    "sim": "run a simulated device (pseudo-terminal or TCP) until stopped",
+    "record": "record devices into a journal (raw wire bytes, crash-safe)",
+    "info": "summarise a recording: frames, losses, checksum errors, gaps, rate",
+    "replay": "decode a recording again and put every stream on session time",
+    "calibrate": "calibrate a camera rig from a wand dance and a reference object",
+    "reconstruct": "triangulate marker trajectories from observations and a calibration",
+    "model": "learn, show or check a marker model for identification",
+    "export": "write a recording or a trial file as C3D or TRC",
+    "demo": "simulated system end to end: record with faults, decode, report",
+    "udev": "install or check the udev rules for USB-serial adapters and OAK cameras",
+}
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
-        report(f"{self.prog}: {message}")
+        # "spotlab: error: record: ..." for a subcommand, "spotlab: error: ..." else.
+        command = self.prog.partition(" ")[2]
+        report(f"{command}: {message}" if command else message)
         sys.exit(EXIT_USAGE)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every subcommand."""
+def _command_of(argv: Sequence[str]) -> str | None:
+    """The subcommand named in ``argv`` (the first word not an option), if known."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
+
+
+def build_parser(command: str | None = "*") -> argparse.ArgumentParser:
+    """The argument parser: every subcommand, fully defined for ``command`` only.
+
+    Parameters
+    ----------
+    command : str or None
+        The subcommand whose module is imported and whose options are defined; the
+        others get their help line only. ``"*"`` (default): all of them in full.
+    """
     parser = _Parser(
         prog="spotlab",
         description="Acquisition suite for optoelectronic motion measurement.",
@@ -51,31 +72,58 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"spotlab {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
-    for name in COMMANDS:
-        module = importlib.import_module(f"spotlab.console.commands.{name}")
-        module.add_parser(sub)
+    for name, help_line in COMMANDS.items():
+        if command in ("*", name):
+            module = importlib.import_module(f"spotlab.console.commands.{name}")
+            module.add_parser(sub)
+        else:
+            sub.add_parser(name, help=help_line, add_help=False)
     return parser
+
+
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The parser of subcommand ``command`` (``parser`` itself if there is none)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            found: argparse.ArgumentParser = action.choices.get(command, parser)
+            return found
+    return parser
+
+
+def _spotlab_error() -> type[Exception]:
+    """spotlab's error base class, imported only when an error is being matched (it
+    brings numpy, which ``spotlab --version`` and ``--help`` do without)."""
+    from spotlab.core.errors import SpotlabError
+
+    return SpotlabError
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
     try:
+        parser = build_parser(_command_of(argv))
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # named by the subcommand that was given them
+            _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extra)}")
         code = args.run(args)
+    except SystemExit:  # --help, --version and usage errors: argparse has spoken
+        raise
     except KeyboardInterrupt:
         report("interrupted")
         return EXIT_INTERRUPTED
     except CommandError as exc:
         report(str(exc))
         return exc.exit_code
-    except SpotlabError as exc:
+    except _spotlab_error() as exc:
         report(str(exc))
         return EXIT_FAILURE
-    except (FileNotFoundError, PermissionError, IsADirectoryError) as exc:
-        report(f"{exc.strerror}: {exc.filename}")
-        return EXIT_FAILURE
     except BrokenPipeError:
+        return EXIT_FAILURE
+    except OSError as exc:
+        # A file or device the command was given cannot be used: name it, once.
+        where = f": {exc.filename}" if exc.filename is not None else ""
+        report(f"{exc.strerror or exc}{where}")
         return EXIT_FAILURE
     return int(code or 0)
 

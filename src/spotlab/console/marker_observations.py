@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
+from spotlab.console.npz import number, numeric_array, read_npz
 from spotlab.console.recorded_observations import frame_numbers, read_selspot, usable_counts
 from spotlab.console.tables import column, numbered, read_table
 
@@ -91,24 +92,15 @@ def load_observations(path: Path) -> MarkerObservations:
 
 
 def _load_npz(path: Path) -> MarkerObservations:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise CommandError(f"{path}: not a readable npz file ({exc})") from None
+    arrays = read_npz(path)
     if "uv" not in arrays:
         raise CommandError(f"{path}: missing array 'uv' (F, C, M, 2)")
-    try:
-        uv = np.asarray(arrays["uv"], dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CommandError(f"{path}: 'uv' is not numeric") from None
+    uv = numeric_array(path, "uv", arrays["uv"])
     if uv.ndim != 4 or uv.shape[-1] != 2 or 0 in uv.shape:
         raise CommandError(f"{path}: 'uv' must have shape (F, C, M, 2), not {uv.shape}")
-    rate = None
-    if "rate" in arrays:
-        if arrays["rate"].size != 1:
-            raise CommandError(f"{path}: 'rate' must be one number (frames per second)")
-        rate = float(arrays["rate"].ravel()[0])
+    rate = number(path, "rate", arrays["rate"]) if "rate" in arrays else None
+    if rate is not None and not (np.isfinite(rate) and rate > 0):
+        raise CommandError(f"{path}: 'rate' must be a positive number of frames per second")
     labels = [str(x) for x in arrays["labels"].ravel()] if "labels" in arrays else None
     names = [str(x) for x in arrays["camera_names"].ravel()] if "camera_names" in arrays else None
     return MarkerObservations(uv, rate, labels, names)

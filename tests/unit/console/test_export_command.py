@@ -110,3 +110,31 @@ def test_bad_input_is_one_clear_line(
     assert code != 0
     assert message in _one_error_line(capsys)
     assert not (folder / "o.c3d").exists() and not (folder / "o.trc").exists()
+
+
+def test_c3d_to_c3d_keeps_the_force_plates_unless_dropped(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from spotlab.io.c3d_files import read_c3d_parameters
+
+    source = shared_data / "c3d_org_samples" / "sample10" / "TYPE-4.C3D"
+    kept, dropped = tmp_path / "kept.c3d", tmp_path / "dropped.c3d"
+    assert main(["export", str(source), "--c3d", str(kept)]) == 0
+    drop = ["--drop-group", "force_platform"]
+    assert main(["export", str(source), "--c3d", str(dropped), *drop]) == 0
+    capsys.readouterr()
+    original = read_c3d_parameters(source)[1]
+    copy = read_c3d_parameters(kept)[1]
+    assert set(original.groups) <= set(copy.groups)
+    for name in ("TYPE", "CORNERS", "ORIGIN", "CHANNEL", "CAL_MATRIX"):
+        key = f"FORCE_PLATFORM:{name}"
+        assert np.array_equal(copy.get(key).floats(), original.get(key).floats()), key
+    assert "FORCE_PLATFORM" not in read_c3d_parameters(dropped)[1].groups
+
+
+def test_trc_to_trc_keeps_the_time_column(shared_data: Path, tmp_path: Path) -> None:
+    source = shared_data / "opensim_models" / "subject01_walk1.trc"
+    out = tmp_path / "copy.trc"
+    assert main(["export", str(source), "--trc", str(out), "--json"]) == 0
+    assert read_trc(out).metadata["time_text"] == read_trc(source).metadata["time_text"]
+    assert read_trc(out).metadata["time_text"][1] == "0.017000"

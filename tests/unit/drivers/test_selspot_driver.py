@@ -222,13 +222,19 @@ def test_event_replies_while_streaming_are_harmless(peer: SpxPeer) -> None:
         assert n >= 5 and driver.stats.crc_errors == 0
 
 
-def test_stop_without_reply_times_out_but_closes(tmp_path: Path) -> None:
+def test_stop_without_reply_is_a_warning_and_closes(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    tap = Tap()
     with SpxPeer(tmp_path, answers={"STOP": None}) as peer:
         driver = make_driver(peer.path, reply_timeout=0.3)
+        driver.add_tap(tap)
         driver.start()
         collect(driver, 2)
-        with pytest.raises(DeviceTimeout, match="STOP:"):
-            driver.close()
+        with caplog.at_level("WARNING"):
+            driver.close()  # what was recorded stays good: no error
+        assert "no reply to STOP:" in caplog.text and not driver._link.is_open
+        assert "stop_unconfirmed" in [kind for kind, _ in tap.events]
         driver.close()
 
 
@@ -256,7 +262,7 @@ def test_recovers_from_silence(peer: SpxPeer) -> None:
         while driver.stats.reconnects == 0 and time.monotonic() - t0 < 5:
             driver.recv(0.05)
         assert driver.stats.reconnects == 1
-        assert 0.4 < time.monotonic() - t0  # max(0.5 s, 20 periods) of silence first
+        assert 0.9 < time.monotonic() - t0  # max(1 s, 20 periods) of silence first
         collect(driver, 3)
 
 

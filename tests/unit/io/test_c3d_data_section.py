@@ -11,8 +11,6 @@ import pytest
 
 from spotlab.io import Trial, write_c3d
 
-pytest.importorskip("c3d")
-
 
 def _expected(trial: Trial, per_frame: int) -> bytes:
     """The data section as the C3D manual lays it out, one frame and one marker at a time."""

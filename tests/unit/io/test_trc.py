@@ -85,3 +85,30 @@ def test_bad_rows_and_counts(shared_data: Path, tmp_path: Path) -> None:
         read_trc(tmp_path / "text.trc")
     with pytest.raises(RecordingError, match="cannot read the file"):
         read_trc(tmp_path / "absent.trc")
+
+
+@pytest.mark.parametrize("name", ["bmc/walk1.trc", "opensim_models/subject01_walk1.trc"])
+def test_round_trip_keeps_the_time_column_and_the_header(
+    shared_data: Path, tmp_path: Path, name: str
+) -> None:
+    """OpenSim's file has 0.017 at 60 Hz (not 1/60) and Cortex's 150.00: both kept as written."""
+    source = shared_data / name
+    write_trc(tmp_path / "w.trc", read_trc(source))
+    original = source.read_text().splitlines()
+    written = (tmp_path / "w.trc").read_text().splitlines()
+    assert written[2].split("\t") == [v.strip() for v in original[2].split("\t")]
+
+    def times(lines: list[str]) -> list[str]:
+        return [line.split("\t")[1].strip() for line in lines[5:] if line.strip()]
+
+    assert times(written) == times(original)
+    assert len(times(written)) == read_trc(source).n_frames
+
+
+def test_time_column_recomputed_when_it_no_longer_fits(shared_data: Path, tmp_path: Path) -> None:
+    trial = read_trc(shared_data / "opensim_models" / "subject01_walk1.trc")
+    trial.points = trial.points[:10]  # cut: the read times no longer describe the trial
+    write_trc(tmp_path / "cut.trc", trial)
+    back = read_trc(tmp_path / "cut.trc")
+    assert back.metadata["time_text"][1] == f"{1 / 60:.6f}"
+    assert back.metadata["header"]["NumFrames"] == "10"

@@ -5,21 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 from numpy.testing import assert_allclose
 from scipy import optimize
 
 from spotlab.kinematics import SmoothingSpline
 
-# the shared folder beside the project (CI clones it there too)
-DATA = Path(__file__).resolve().parents[3].parent / "shared" / "data"
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="shared reference data not present")
 
-
-@needs_data
-def test_gcvspline_notebook_work_vector() -> None:
+def test_gcvspline_notebook_work_vector(shared_data: Path) -> None:
     # Fortran GCVSPL, M = 2, MD = 2, WX = w^2, WY = 1 (SOURCES.md 3d)
-    d = np.genfromtxt(DATA / "gcvspline_notebook_example/inputs.csv", delimiter=",", names=True)
+    d = np.genfromtxt(
+        shared_data / "gcvspline_notebook_example/inputs.csv", delimiter=",", names=True
+    )
     # constant weights w^2 only rescale the criterion: unit weights give the same
     # spline with p / w^2, and MSR and variance / w^2
     w2 = d["w"][0] ** 2
@@ -32,9 +28,8 @@ def test_gcvspline_notebook_work_vector() -> None:
     assert_allclose(g.variance, 0.010289704141637, rtol=1e-6)
 
 
-@needs_data
-def test_scipy_gcvspl_fixed_sample() -> None:
-    ref = np.load(DATA / "scipy_gcvspl/gcvspl.npz")
+def test_scipy_gcvspl_fixed_sample(shared_data: Path) -> None:
+    ref = np.load(shared_data / "scipy_gcvspl/gcvspl.npz")
     x, y, y_ref = ref["x"], ref["y"], ref["y_GCVSPL"]
     s = SmoothingSpline(x, y, degree=3)
     # at our GCV minimum: GCVSPL stopped its search 4e-5 away in p, hence 6e-6 in values
@@ -53,18 +48,16 @@ def test_scipy_gcvspl_fixed_sample() -> None:
     assert_allclose(SmoothingSpline(x, y, degree=3, p=p_gcvspl)(x), y_ref, rtol=1e-8, atol=0)
 
 
-@needs_data
-def test_dowling_acceleration_at_least_as_good_as_published_gcvspl() -> None:
-    d = np.genfromtxt(DATA / "dowling1985/dowling1985.csv", delimiter=",", names=True)
+def test_dowling_acceleration_at_least_as_good_as_published_gcvspl(shared_data: Path) -> None:
+    d = np.genfromtxt(shared_data / "dowling1985/dowling1985.csv", delimiter=",", names=True)
     s = SmoothingSpline(d["time_s"], d["disp_rad"], degree=5)
     rmse = np.sqrt(np.mean((s(d["time_s"], nu=2) - d["acc_rad_per_s2"]) ** 2))
     # Davis & Challis (2020): GCV quintic spline (GCVSPL) RMSE 23.6 rad/s^2; we reach 21.9
     assert rmse <= 23.6
 
 
-@needs_data
-def test_pezzack_acceleration() -> None:
-    d = np.loadtxt(DATA / "bmc/Pezzack.txt", skiprows=6)
+def test_pezzack_acceleration(shared_data: Path) -> None:
+    d = np.loadtxt(shared_data / "bmc/Pezzack.txt", skiprows=6)
     s = SmoothingSpline(d[:, 0], d[:, 1], degree=5)
     rmse = np.sqrt(np.mean((s(d[:, 0], nu=2) - d[:, 3]) ** 2))
     # no published GCVSPL figure for these data; measured 4.16 rad/s^2 (range -96 .. 68)

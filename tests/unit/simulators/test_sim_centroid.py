@@ -121,6 +121,7 @@ def test_sim_url_frames_match_the_truth(tmp_path: Path) -> None:
     assert t["markers_mm"].shape[1:] == (40, 3) and t["labels"].shape == (40,)
     row = {int(f): k for k, f in enumerate(t["frame_no"])}
     c_total = t["camera_time_s"].shape[1]
+    agree = [0, 0, 0, 0]  # merged flagged, merged, single flagged, single
     for f in range(bf.n_frames):
         k = row[int(bf.camera_frame[f, 0])]
         for c in range(4):
@@ -129,8 +130,14 @@ def test_sim_url_frames_match_the_truth(tmp_path: Path) -> None:
             assert stop - start == s.stop - s.start
             np.testing.assert_allclose(bf.uv[s], t["blob_uv_true"][start:stop], atol=0.6)
             merged = t["blob_kind"][start:stop] == KIND_MERGED
-            assert ((bf.flags[s] & BLOB_MERGED) != 0).tolist() == merged.tolist()
+            flagged = (bf.flags[s] & BLOB_MERGED) != 0
+            agree[0] += int((flagged & merged).sum())
+            agree[1] += int(merged.sum())
+            agree[2] += int((flagged & ~merged).sum())
+            agree[3] += int((~merged).sum())
             assert bf.exposure_us[f, c] == t["camera_tick_us"][k, c]
+    # The hub flags merges from their shape: most merges, few single blobs.
+    assert agree[1] > 0 and agree[0] >= 0.5 * agree[1] and agree[2] <= 0.02 * agree[3], agree
     assert (t["blob_kind"] == KIND_GHOST).any()
     assert np.ptp(t["camera_offset_s"]) > 1.0  # every camera keeps its own clock
 
@@ -195,3 +202,22 @@ def test_hub_built_without_a_rig_uses_the_reference_ring() -> None:
     for ours, theirs in zip(device.rig.cameras, reference.cameras, strict=True):
         np.testing.assert_allclose(ours.center, theirs.center)
         assert ours.size == theirs.size
+
+
+def test_the_merged_flag_follows_the_blob_shape() -> None:
+    """Two discs far apart in one blob look elongated (flagged); nearly coincident, round."""
+    ring = ring_rig(1).cameras[0]
+    cam = Camera(ring.K, np.zeros(5), ring.R, ring.t, ring.size)
+    z = 3000.0
+    model = BlobModel(noise_blobs=0.0, centroid_noise_px=0.0, shape_noise=0.0)
+    d_px = cam.K[0, 0] * model.marker_diameter_mm / z
+
+    def blobs_at(sep_px: float) -> tuple[int, int]:
+        pts = [[640.0 - sep_px / 2, 500.0, 1.0], [640.0 + sep_px / 2, 500.0, 1.0]]
+        X = np.array([cam.R.T @ (np.linalg.solve(cam.K, p) * z - cam.t) for p in pts])
+        b = render_camera(cam, X, model, np.random.default_rng(0))
+        return b.uv.shape[0], int(b.flags[0] & BLOB_MERGED)
+
+    assert blobs_at(0.8 * d_px) == (1, BLOB_MERGED)  # elongation sqrt(1 + 1.6^2) = 1.9
+    assert blobs_at(0.1 * d_px) == (1, 0)  # elongation 1.02: one round blob
+    assert blobs_at(1.5 * d_px)[0] == 2  # apart: two blobs

@@ -108,11 +108,8 @@ def test_sampled_motion_interpolates_and_loops() -> None:
 
 
 @pytest.fixture
-def c3d_file(shared_data: Path) -> Path:
-    path = shared_data / "c3d_org_samples" / "sample01" / "Eb015pi.c3d"
-    if not path.is_file():
-        pytest.skip(f"{path} not found")
-    return path
+def c3d_file(shared_file: Callable[[str], Path]) -> Path:
+    return shared_file("c3d_org_samples/sample01/Eb015pi.c3d")
 
 
 def test_c3d_replay(c3d_file: Path) -> None:

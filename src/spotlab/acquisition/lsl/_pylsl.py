@@ -2,13 +2,27 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from types import ModuleType
 
 from spotlab.core.errors import ConfigurationError
 
+#: liblsl's log level unless told otherwise: errors only. Its default (info) prints
+#: lines such as "Loaded default config" on the user's terminal.
+QUIET_LOG_LEVEL = -3
+
+
+def _config_files() -> list[Path]:
+    """Where liblsl looks for its configuration file, in its order."""
+    found = [Path(os.environ["LSLAPICFG"])] if os.environ.get("LSLAPICFG") else []
+    return [*found, Path("lsl_api.cfg"), Path.home() / "lsl_api" / "lsl_api.cfg",
+            Path("/etc/lsl_api/lsl_api.cfg")]  # fmt: skip
+
 
 def pylsl_module() -> ModuleType:
-    """The ``pylsl`` module, imported now.
+    """The ``pylsl`` module, imported now, with liblsl's log quiet (errors only) when
+    no liblsl configuration file says otherwise.
 
     Raises
     ------
@@ -22,7 +36,19 @@ def pylsl_module() -> ModuleType:
             f"LSL needs pylsl, which is not usable here ({exc}); "
             "install it with: pip install 'spotlab[lsl]'"
         ) from exc
+    global _quieted
+    if not _quieted:
+        _quieted = True
+        setter = getattr(pylsl, "set_config_content", None)
+        if setter is not None and not any(path.is_file() for path in _config_files()):
+            try:
+                setter(f"[log]\nlevel = {QUIET_LOG_LEVEL}\n")
+            except (AttributeError, RuntimeError):
+                pass  # an old liblsl: its own log level stays
     return pylsl
+
+
+_quieted = False
 
 
 def configure(
@@ -42,7 +68,7 @@ def configure(
     known_peers : tuple of str, optional
         Host names or addresses queried directly when resolving streams.
     log_level : int, optional
-        liblsl's log level (-3 errors only ... 0 info; default: liblsl's own).
+        liblsl's log level (-3 errors only ... 0 info; default -3, errors only).
     session_id : str, optional
         LSL session id: only streams of the same id see each other.
 
@@ -61,8 +87,8 @@ def configure(
         lines += ["[lab]", "KnownPeers = {" + ", ".join(known_peers) + "}"]
     if session_id:
         lines += ([] if known_peers else ["[lab]"]) + [f"SessionID = {session_id}"]
-    if log_level is not None:
-        lines += ["[log]", f"level = {int(log_level)}"]
+    level = QUIET_LOG_LEVEL if log_level is None else int(log_level)
+    lines += ["[log]", f"level = {level}"]
     text = "\n".join(lines) + "\n"
     pylsl = pylsl_module()
     setter = getattr(pylsl, "set_config_content", None)

@@ -23,6 +23,7 @@ from spotlab.console.calibration_inputs import (
 )
 from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_paths
 
 
 def add_parser(sub: Any) -> None:
@@ -42,9 +43,26 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--wand-length", type=float, help="wand length in mm (or in the npz)")
     p.add_argument("--frame", type=Path, help="reference-object CSV table (CSV input)")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), help="pixels")
-    p.add_argument("--wand-markers", type=int, nargs=2, metavar=("A", "B"))
-    p.add_argument("--frame-recording", type=Path)
-    p.add_argument("--frame-markers", type=int, nargs="+")
+    p.add_argument(
+        "--wand-markers",
+        type=int,
+        nargs=2,
+        metavar=("A", "B"),
+        help="marker numbers of the wand's two ends in the recording (.spj input)",
+    )
+    p.add_argument(
+        "--frame-recording",
+        type=Path,
+        metavar="STATIC.spj",
+        help="static recording of the reference object (L-frame) (.spj input)",
+    )
+    p.add_argument(
+        "--frame-markers",
+        type=int,
+        nargs="+",
+        metavar="N",
+        help="marker numbers of the reference object, in the order of --frame-points",
+    )
     p.add_argument("--frame-points", type=Path, help="CSV with X, Y, Z (mm) per frame marker")
     p.add_argument("--report", type=Path, help="quality report (JSON); default OUT.report.json")
     p.add_argument("--figure", type=Path, help="quality figure (PNG); default OUT.report.png")
@@ -76,6 +94,10 @@ def _load(args: argparse.Namespace) -> WandObservations:
 
 
 def run(args: argparse.Namespace) -> int:
+    out: Path = args.out
+    report_path = args.report or out.with_suffix(".report.json")
+    figure_path = args.figure or out.with_suffix(".report.png")
+    check_output_paths([("--out", out), ("--report", report_path), ("--figure", figure_path)])
     obs = _load(args)
     length = args.wand_length if args.wand_length is not None else obs.wand_length
     if length is None:
@@ -96,9 +118,6 @@ def run(args: argparse.Namespace) -> int:
         distortion=() if args.no_distortion else ("k1", "k2", "p1", "p2", "k3"),
         progress=progress,
     )
-    out: Path = args.out
-    report_path = args.report or out.with_suffix(".report.json")
-    figure_path = args.figure or out.with_suffix(".report.png")
     result.rig.save(out)
     report_path.write_text(json.dumps(result.report, indent=2) + "\n")
     write_report_figure(

@@ -26,6 +26,7 @@ from typing import Any
 from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
+from spotlab.console.paths import check_output_paths
 from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
 from spotlab.console.synchronised_export import reconstruct_recording
 from spotlab.console.trajectories import (
@@ -34,9 +35,7 @@ from spotlab.console.trajectories import (
     reconstruct_file,
     write_trial,
 )
-from spotlab.io import Trial, read_c3d, read_trc
-
-TRIAL_READERS = {".c3d": read_c3d, ".trc": read_trc}
+from spotlab.io import TRIAL_READERS, Trial
 
 
 def add_parser(sub: Any) -> None:
@@ -50,6 +49,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--c3d", type=Path, metavar="OUT", help="write marker trajectories as C3D")
     p.add_argument("--trc", type=Path, metavar="OUT", help="write marker trajectories as TRC")
     p.add_argument("--calibration", type=Path, help="rig (TOML) to reconstruct a recording")
+    p.add_argument(
+        "--drop-group",
+        action="append",
+        default=[],
+        metavar="GROUP",
+        help="leave this C3D parameter group out of --c3d OUT (e.g. FORCE_PLATFORM; every "
+        "group the input C3D file has is kept otherwise); repeat",
+    )
     p.add_argument(
         "--timestamps",
         type=Path,
@@ -103,6 +110,14 @@ def _outputs(args: argparse.Namespace) -> list[Path]:
     for flag, path in (("--c3d", args.c3d), ("--trc", args.trc)):
         if path is not None and path.suffix.lower() != "." + flag[2:]:
             raise CommandError(f"{flag} {path}: the file name must end in .{flag[2:]}")
+    check_output_paths(
+        [
+            ("--c3d", args.c3d),
+            ("--trc", args.trc),
+            ("--timestamps", args.timestamps),
+            ("--sync-report", args.sync_report),
+        ]
+    )
     check_outputs(outputs)
     return outputs
 
@@ -167,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
         known = ", ".join([*TRIAL_READERS, *OBSERVATION_SUFFIXES])
         raise CommandError(f"{path}: unknown input format {suffix!r} ({known})")
     for out in outputs:
-        write_trial(out, trial)
+        write_trial(out, trial, drop_groups=args.drop_group)
     if args.json:
         print(json.dumps({**summary, "outputs": [str(p) for p in outputs]}))
     elif "method" in summary:

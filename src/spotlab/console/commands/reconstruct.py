@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from spotlab.console.paths import check_output_paths
 from spotlab.console.trajectories import (
     check_outputs,
     print_summary,
@@ -48,6 +49,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output_paths([("--out", args.out)])
     check_outputs([args.out])
     result = reconstruct_file(
         args.input,

@@ -10,7 +10,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import spotlab.simulators  # noqa: F401  (registers the sim:// URL scheme with pyserial)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.acquisition.summary import summarize
@@ -25,6 +24,7 @@ from spotlab.console.device_settings import (
     requests_from_options,
 )
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_paths
 from spotlab.console.progress import Progress
 from spotlab.console.session_times import WIRING_KEY, parse_wiring
 from spotlab.core.wire import LinkEventKind
@@ -223,6 +223,7 @@ def _summary_lines(result: dict[str, Any]) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise CommandError(f"--seconds must be positive, got {args.seconds}")
+    check_output_paths([("--out", args.out)])
     if args.out.exists() and not args.overwrite:
         raise CommandError(f"{args.out} exists; choose another --out or add --overwrite")
     lab = load_lab(args.lab) if args.lab is not None else None

@@ -22,6 +22,7 @@ import numpy as np
 from spotlab.acquisition.replay import summarize
 from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_paths
 from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
 
 
@@ -53,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     path: Path = args.file
     if not path.is_file():
         raise CommandError(f"{path}: no such file")
+    check_output_paths([("--timestamps", args.timestamps)])
     summary = summarize(path, decoder_for).to_dict()
     timebase = recording_timebase(path, parse_wiring(args.wiring))
     report = timebase.report()

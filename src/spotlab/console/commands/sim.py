@@ -10,10 +10,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
+from spotlab.console.paths import check_output_dir, check_output_paths
+from spotlab.io import FileFormatError
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
-from spotlab.simulators.motions import MOTIONS
+from spotlab.simulators.faults import parse_schedule
+from spotlab.simulators.lab import lab_dir
+from spotlab.simulators.motions import MOTIONS, from_c3d
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -55,9 +59,28 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
     p.add_argument("--faults", default="", help="fault schedule, e.g. 'bitflip@1.5,drop@2,reset@6'")
     p.add_argument("--fault-log", type=Path, help="write what was injected as JSON")
-    p.add_argument("--clock-offset", type=float, default=0.0, metavar="SECONDS")
-    p.add_argument("--clock-drift-ppm", type=float, default=0.0, metavar="PPM")
-    p.add_argument("--clock-jitter", type=float, default=0.0, metavar="SECONDS")
+    p.add_argument(
+        "--clock-offset",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="the device counter reads this many seconds at power-up (default 0)",
+    )
+    p.add_argument(
+        "--clock-drift-ppm",
+        type=float,
+        default=0.0,
+        metavar="PPM",
+        help="the device oscillator's error in parts per million, positive runs fast (default 0)",
+    )
+    p.add_argument(
+        "--clock-jitter",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="RMS scatter (s) of the instant a frame is taken around the time its timestamp "
+        "names (default 0)",
+    )
     p.add_argument(
         "--clock-step",
         action="append",
@@ -128,11 +151,12 @@ def add_parser(sub: Any) -> None:
     cen.add_argument("--noise-blobs", type=float, default=0.02, help="noise blobs per image")
     cen.add_argument(
         "--sunlight", action="append", default=[], metavar="[CAM@]AT:DURATION",
-        help="camera CAM (default 0) sees thousands of blobs from AT s after START:; repeat",
+        help="camera CAM (1 to --cameras, default 1) sees thousands of blobs from AT s "
+        "after START:; repeat",
     )  # fmt: skip
     cen.add_argument(
         "--camera-off", action="append", default=[], metavar="CAM@AT:DURATION",
-        help="camera CAM delivers no frames from AT s after START:; repeat",
+        help="camera CAM (1 to --cameras) delivers no frames from AT s after START:; repeat",
     )  # fmt: skip
     cen.add_argument("--no-occlusion", action="store_true", help="body segments hide nothing")
     cen.add_argument(
@@ -221,16 +245,38 @@ def timer_options_from_args(args: argparse.Namespace) -> service.TimerSimOptions
     return options
 
 
+def _episodes(items: list[str], option: str, cameras: int, *, default_camera: bool) -> str:
+    """``[CAM@]AT:DURATION`` options, cameras counted from 1 as everywhere on the command
+    line, as the simulator's ``CAM@AT:DURATION`` list (cameras counted from 0)."""
+    out = []
+    for item in items:
+        cam, sep, rest = item.partition("@")
+        if not sep:
+            if not default_camera:
+                raise CommandError(f"{option} {item!r}: expected CAM@AT:DURATION")
+            cam, rest = "1", item
+        try:
+            number = int(cam)
+        except ValueError:
+            raise CommandError(f"{option} {item!r}: CAM must be a camera number") from None
+        if not 1 <= number <= cameras:
+            raise CommandError(f"{option} {item!r}: cameras are numbered 1 to {cameras}")
+        out.append(f"{number - 1}@{rest}")
+    return ",".join(out)
+
+
 def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     """Video-centroid simulator options from parsed command-line arguments."""
-    sun = [item if "@" in item else f"0@{item}" for item in args.sunlight]
+    cameras = 8 if args.cameras is None else args.cameras
+    sun = _episodes(args.sunlight, "--sunlight", cameras, default_camera=True)
+    off = _episodes(args.camera_off, "--camera-off", cameras, default_camera=False)
     options = CentroidSimOptions(
-        cameras=8 if args.cameras is None else args.cameras, markers=args.markers,
+        cameras=cameras, markers=args.markers,
         rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
         rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
-        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=",".join(sun),
-        camera_off=",".join(args.camera_off), occlusion=0 if args.no_occlusion else 1,
+        ghost_rate=args.ghosts, noise_blobs=args.noise_blobs, sunlight=sun,
+        camera_off=off, occlusion=0 if args.no_occlusion else 1,
         lab_name=args.lab_name or "centroid", lab=args.lab,
     )  # fmt: skip
     try:
@@ -240,7 +286,32 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     return options
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """Refuse what would fail once the device serves: bad output paths, lab folder,
+    fault schedule or motion file (a failure in the serving thread is no clear error)."""
+    check_output_paths(
+        [
+            ("--truth", args.truth),
+            ("--fault-log", args.fault_log),
+            ("--rig-out", args.rig_out),
+            ("--model-out", getattr(args, "model_out", None)),
+        ]
+    )
+    check_output_dir("--lab" if args.lab is not None else "lab folder", lab_dir(args.lab))
+    try:
+        parse_schedule(args.faults)
+    except ValueError as exc:
+        raise CommandError(f"--faults: {exc}") from None
+    motion = str(args.motion)
+    if args.family == "selspot" and motion not in MOTIONS and Path(motion).is_file():
+        try:
+            from_c3d(motion)
+        except (ValueError, FileFormatError) as exc:
+            raise CommandError(f"--motion: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
+    check_args(args)
     if args.family == "centroid":
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")

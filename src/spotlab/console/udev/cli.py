@@ -31,7 +31,9 @@ def add_udev_parser(subparsers: Any) -> argparse.ArgumentParser:
         "ModemManager away from them, set the FTDI latency timer to 1 ms and create "
         "/dev/spotlab/<serial> links. See docs/udev.md.",
     )
-    actions = parser.add_subparsers(dest="udev_action", metavar="ACTION")
+    actions = parser.add_subparsers(
+        dest="udev_action", metavar="ACTION", help="install, show or check"
+    )
     actions.required = True
 
     inst = actions.add_parser(
@@ -68,7 +70,12 @@ def add_udev_parser(subparsers: Any) -> argparse.ArgumentParser:
         description="Print the shipped rules files; with --policy only the ones that "
         "install --policy writes.",
     )
-    show.add_argument("--policy", choices=tuple(POLICIES), default=None)
+    show.add_argument(
+        "--policy",
+        choices=tuple(POLICIES),
+        default=None,
+        help="only the files install --policy writes (default: all shipped files)",
+    )
     show.add_argument("--json", action="store_true", help="print JSON")
 
     check = actions.add_parser(
@@ -78,7 +85,13 @@ def add_udev_parser(subparsers: Any) -> argparse.ArgumentParser:
         "unbalanced quotes, GOTO without LABEL and world-writable modes. Without FILE, "
         "check the shipped rules. Never runs udevadm.",
     )
-    check.add_argument("files", nargs="*", type=Path, metavar="FILE")
+    check.add_argument(
+        "files",
+        nargs="*",
+        type=Path,
+        metavar="FILE",
+        help="rules files (default: the shipped ones)",
+    )
     check.add_argument("--strict", action="store_true", help="fail on warnings too")
     check.add_argument("--json", action="store_true", help="print JSON")
 

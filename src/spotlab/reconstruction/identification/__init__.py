@@ -8,6 +8,7 @@ Methods and measured figures: ``docs/identification.md``.
 
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import Correspondence, match_blobs
+from spotlab.reconstruction.identification.fit import ModelFit, model_fit
 from spotlab.reconstruction.identification.geometry import RigGeometry
 from spotlab.reconstruction.identification.identifier import (
     FLOODED,
@@ -28,7 +29,9 @@ __all__ = [
     "Identifier",
     "Link",
     "MarkerModel",
+    "ModelFit",
     "RigGeometry",
     "Segment",
     "match_blobs",
+    "model_fit",
 ]

@@ -15,9 +15,8 @@ from __future__ import annotations
 
 import json
 import os
-import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -27,6 +26,12 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial.distance import squareform
 
 from spotlab.core.errors import ReconstructionError
+from spotlab.reconstruction.identification.spreads import (
+    check_motion,
+    distance_range,
+    least_varying,
+    rigid_tolerance,
+)
 from spotlab.reconstruction.rigid import rigid_pose
 
 __all__ = ["Link", "MarkerModel", "Segment"]
@@ -36,6 +41,12 @@ IntArray = NDArray[np.intp]
 
 #: Links a marker on no rigid cluster needs to be labelled by its links alone.
 MIN_LINKS = 3
+#: A pair's spread counts (1 + length / this) times when clusters are formed: a long
+#: pair that varies a little more likely crosses a joint the trial hardly moved.
+LENGTH_SCALE_MM = 500.0
+#: Chosen link spread: this many rigid tolerances, and at least ``LINK_FLOOR_MM``.
+LINK_FACTOR = 5.0
+LINK_FLOOR_MM = 50.0
 
 
 @dataclass(frozen=True)
@@ -86,11 +97,19 @@ class MarkerModel:
     links : tuple of Link
         Distance ranges of marker pairs not on a common segment. A marker on no
         segment needs at least three.
+    tolerance_mm : float or None
+        Largest distance spread (mm) of the pairs taken as rigid when the clusters were
+        found (:meth:`infer`); None when the segments were given.
+    link_spread_mm : float or None
+        Largest distance spread (mm) of the pairs taken as links; None: links not
+        learnt by spread.
     """
 
     labels: tuple[str, ...]
     segments: tuple[Segment, ...]
     links: tuple[Link, ...] = ()
+    tolerance_mm: float | None = None
+    link_spread_mm: float | None = None
 
     def __post_init__(self) -> None:
         M = len(self.labels)
@@ -130,9 +149,15 @@ class MarkerModel:
 
     @cached_property
     def intervals(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
-        """Every constrained pair ``(i, j, min mm, max mm)``: segment pairs (min = max,
-        their model distance), then links."""
+        """Every constrained pair ``(i, j, min mm, max mm)``: segment pairs, then links.
+
+        A segment pair's range is its model distance, widened by half the rigid
+        tolerance the clusters were found with (:attr:`tolerance_mm`, when inferred):
+        the pairs of a cluster varied by less than that tolerance, around their mean, so
+        skin markers keep their labels through the skin motion the model was learnt
+        with. Segments given by name (no tolerance) have min = max."""
         i, j, d = self.pairs()
+        w = 0.0 if self.tolerance_mm is None else self.tolerance_mm / 2
         a = np.array([k.a for k in self.links], dtype=np.intp)
         b = np.array([k.b for k in self.links], dtype=np.intp)
         lo = np.array([k.min_mm for k in self.links], dtype=np.float64)
@@ -140,8 +165,8 @@ class MarkerModel:
         return (
             np.concatenate([i, a]),
             np.concatenate([j, b]),
-            np.concatenate([d, lo]),
-            np.concatenate([d, hi]),
+            np.concatenate([np.maximum(d - w, 0.0), lo]),
+            np.concatenate([d + w, hi]),
         )
 
     def pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
@@ -165,6 +190,7 @@ class MarkerModel:
         segments: Mapping[str, Sequence[str]],
         *,
         link_spread_mm: float | None = None,
+        min_links: int = 0,
     ) -> MarkerModel:
         """Learn each segment's layout (and links) from labelled trajectories.
 
@@ -179,6 +205,9 @@ class MarkerModel:
             Link every pair of markers not on a common segment whose distance varies by
             less than this over the frames (its range seen is the link's). None: no
             links, every marker must be on a segment.
+        min_links : int
+            With ``link_spread_mm``: a marker on no segment with fewer links than this
+            is also linked to its least varying partners until it has this many.
 
         Returns
         -------
@@ -212,14 +241,15 @@ class MarkerModel:
             out.append(Segment(str(name), tuple(m), coords - coords.mean(axis=0)))
         links: list[Link] = []
         if link_spread_mm is not None:
-            lo, hi = _distance_range(X)
+            lo, hi = distance_range(X)
             owner = np.full(len(labels), -1)
             for s, seg in enumerate(out):
                 owner[list(seg.markers)] = s
             a, b = np.triu_indices(len(labels), 1)
-            keep = (hi[a, b] - lo[a, b] < link_spread_mm) & (
-                (owner[a] < 0) | (owner[a] != owner[b])
-            )
+            apart = (owner[a] < 0) | (owner[a] != owner[b])
+            keep = (hi[a, b] - lo[a, b] < link_spread_mm) & apart
+            if min_links > 0:
+                keep |= least_varying(lo, hi, owner, a, b, keep, apart, min_links)
             links = [
                 Link(int(i), int(j), float(lo[i, j]), float(hi[i, j]))
                 for i, j in zip(a[keep], b[keep], strict=True)
@@ -232,37 +262,75 @@ class MarkerModel:
         labels: Sequence[str],
         positions: Any,
         *,
-        tolerance_mm: float = 2.0,
+        tolerance_mm: float | None = None,
         link_spread_mm: float | None = None,
     ) -> MarkerModel:
         """Find the rigid clusters themselves: markers whose distances stay constant.
 
         Two markers are rigidly linked when the spread (max - min) of their distance
-        over the frames where both are seen is below ``tolerance_mm``; a segment is a
+        over the frames where both are seen, weighted by ``1 + length / 500 mm`` (length:
+        their largest distance), is below ``tolerance_mm``; a segment is a
         group of 3 or more in which every pair is linked (complete-linkage clustering of
         the spreads, cut at ``tolerance_mm``), so markers near a joint, linked to both
-        neighbours, do not join two segments into one. With ``link_spread_mm``, pairs
-        whose distance varies by less than that become links (see
-        :meth:`from_trajectories`) and markers on no cluster of 3 are labelled by them;
-        a group on a line (its rotation about the line unknown) is no segment either.
-        A trial that hardly moves makes every marker look rigid: learn from one in which
-        the segments move through their range.
+        neighbours, do not join two segments into one. The length weight keeps apart
+        far markers whose distance a trial hardly changed (the head and the sacrum in
+        the first strides of a walk: they are not one rigid body, and out of sample
+        their distance varies with the trunk's flexion, in proportion to their length);
+        exactly rigid markers (spread 0) are not affected. Pairs whose distance varies by
+        less than ``link_spread_mm`` become links (see :meth:`from_trajectories`) and
+        markers on no cluster of 3 are labelled by them; a group on a line (its rotation
+        about the line unknown) is no segment either.
+
+        Parameters
+        ----------
+        labels : sequence of str, length M
+        positions : array_like, shape (F, M, 3)
+            Labelled trajectories (mm), NaN where missing.
+        tolerance_mm : float, optional
+            Largest spread of a rigid pair (mm). Default: chosen from the trial
+            (:func:`rigid_tolerance`): twice the median, over the markers, of each
+            marker's second-smallest spread, and at least 2 mm.
+        link_spread_mm : float, optional
+            Largest spread of a link (mm); 0 for no links (every marker must then be on
+            a cluster). Default: ``5 * tolerance_mm``, at least 50 mm, and every marker
+            off the clusters also linked to its 3 least varying partners, so that it
+            can be labelled by its links.
+
+        Returns
+        -------
+        MarkerModel
+            With the tolerance and link spread it was learnt with
+            (:attr:`MarkerModel.tolerance_mm`, :attr:`MarkerModel.link_spread_mm`).
 
         Raises
         ------
         ReconstructionError
-            When a marker is on no cluster of 3 or more and has fewer than 3 links.
+            For a trial that hardly moves (most distances constant: every marker looks
+            rigid; learn from a trial in which the segments move through their range),
+            or a marker on no cluster of 3 or more with fewer than 3 links.
         """
         labels = tuple(str(x) for x in labels)
         X = _positions(positions, len(labels))
-        lo, hi = _distance_range(X)
+        lo, hi = distance_range(X)
         spread = np.nan_to_num(hi - lo, nan=1e9)
         np.fill_diagonal(spread, 0.0)
-        tree = linkage(squareform(np.maximum(spread, spread.T), checks=False), "complete")
+        spread = np.maximum(spread, spread.T)
+        if tolerance_mm is None:
+            tolerance_mm = rigid_tolerance(spread)
+            check_motion(spread, tolerance_mm)
+        if link_spread_mm is None:
+            link_spread_mm = max(LINK_FLOOR_MM, LINK_FACTOR * tolerance_mm)
+            min_links = MIN_LINKS
+        else:
+            min_links = 0
+        length = np.nan_to_num(np.maximum(hi, hi.T), nan=0.0)
+        np.fill_diagonal(length, 0.0)
+        weighted = spread * (1.0 + length / LENGTH_SCALE_MM)
+        tree = linkage(squareform(weighted, checks=False), "complete")
         group = fcluster(tree, tolerance_mm, criterion="distance") - 1
         groups = [[labels[m] for m in np.flatnonzero(group == g)] for g in np.unique(group)]
         small = [g for g in groups if len(g) < 3]
-        if small and link_spread_mm is None:
+        if small and link_spread_mm <= 0:
             raise ReconstructionError(
                 "markers on no rigid cluster of 3 or more: "
                 + "; ".join(", ".join(v) for v in small)
@@ -270,19 +338,32 @@ class MarkerModel:
             )
         index = {name: m for m, name in enumerate(labels)}
         solid = [g for g in groups if len(g) >= 3 and _spans_a_plane(X[:, [index[x] for x in g]])]
-        if len(solid) < len(groups) - len(small) and link_spread_mm is None:
+        if len(solid) < len(groups) - len(small) and link_spread_mm <= 0:
             raise ReconstructionError(
                 "markers on a line cannot make a rigid cluster: "
                 + "; ".join(", ".join(g) for g in groups if len(g) >= 3 and g not in solid)
                 + " (give link_spread_mm to label them by their distance links)"
             )
         segments = {f"segment{k + 1}": g for k, g in enumerate(solid)}
-        return cls.from_trajectories(labels, X, segments, link_spread_mm=link_spread_mm)
+        model = cls.from_trajectories(
+            labels,
+            X,
+            segments,
+            link_spread_mm=link_spread_mm if link_spread_mm > 0 else None,
+            min_links=min_links,
+        )
+        return replace(
+            model,
+            tolerance_mm=float(tolerance_mm),
+            link_spread_mm=float(link_spread_mm) if link_spread_mm > 0 else None,
+        )
 
     def to_json(self) -> dict[str, Any]:
         """JSON-safe description (the file layout of :meth:`save`)."""
         return {
             "labels": list(self.labels),
+            "tolerance_mm": self.tolerance_mm,
+            "link_spread_mm": self.link_spread_mm,
             "segments": [
                 {
                     "name": seg.name,
@@ -326,9 +407,15 @@ class MarkerModel:
                      float(k["range_mm"][0]), float(k["range_mm"][1]))
                 for k in data.get("links", [])
             )  # fmt: skip
-        except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+            tolerance = data.get("tolerance_mm")
+            link_spread = data.get("link_spread_mm")
+            learnt = (
+                None if tolerance is None else float(tolerance),
+                None if link_spread is None else float(link_spread),
+            )
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
             raise ReconstructionError(f"{path}: not a marker model ({exc})") from None
-        return cls(labels, segments, links)
+        return cls(labels, segments, links, *learnt)
 
 
 def _positions(positions: Any, M: int) -> FloatArray:
@@ -348,19 +435,3 @@ def _spans_a_plane(X: FloatArray, min_mm: float = 10.0) -> bool:
     centred = complete[0] - complete[0].mean(axis=0)
     off_line = np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(centred.shape[0])
     return bool(off_line > min_mm)
-
-
-def _distance_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Smallest and largest distance (M, M) of every marker pair over the frames of ``X``
-    (F, M, 3) where both are present; NaN for pairs never seen together."""
-    lo = np.full(X.shape[1:2] * 2, np.inf)
-    hi = np.full(X.shape[1:2] * 2, -np.inf)
-    for start in range(0, X.shape[0], 256):  # (256, M, M) at a time
-        D = np.linalg.norm(X[start : start + 256, :, None] - X[start : start + 256, None], axis=-1)
-        D = np.where(np.isfinite(D), D, np.nan)
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pairs
-            lo = np.fmin(lo, np.nanmin(D, axis=0))
-            hi = np.fmax(hi, np.nanmax(D, axis=0))
-    never = ~np.isfinite(lo) | ~np.isfinite(hi)
-    return np.where(never, np.nan, lo), np.where(never, np.nan, hi)

@@ -1,0 +1,187 @@
+"""Marker identification out of sample, on real labelled trials seen by simulated cameras.
+
+Prints one JSON object per trial file, then a summary. For every C3D and TRC file under
+``--data`` (default ``../shared/data``) that suits (see below):
+
+1. the labelled markers (:func:`spotlab.io.labelled_markers`: named, seen in half the
+   frames, not a model output), less the points rigid to 0.5 mm with two others
+   (segment axes and joint centres a program computed), over the frames where at least
+   80 % of them are seen;
+2. a marker model learnt with :meth:`MarkerModel.infer` **with its defaults** from the
+   first half of those frames (``--learn 0.5``);
+3. the whole trial placed in the volume of the 8-camera reference ring rig and rendered
+   as blobs (:func:`spotlab.testing.trial_scene.trial_scene`: centroid noise 0.07 px,
+   merged blobs, floor-reflection ghosts for 2 % of (camera, marker) pairs, noise blobs,
+   each (camera, marker) pair hidden 5 % of the time in 5-60 frame episodes, each marker
+   hidden from every camera 0.1 times a second for 10-90 frames);
+4. the second half identified frame by frame by :class:`Identifier` (defaults), cold
+   (no labels carried over from the learning frames), and scored against the file's
+   positions only at the end.
+
+Figures per trial (marker-frames of the labelled half):
+
+* ``right``: reported within ``--tolerance`` (10 mm) of the file's position of their
+  own label, over all reported; ``wrong``: the rest of the reported ones (another
+  marker's position, or no marker);
+* ``coverage``: reported right over the marker-frames the file holds;
+  ``coverage_visible``: reported right over those seen as a blob of their own by two
+  cameras or more (what any identification could reconstruct);
+* ``fps``: frames identified per second of wall time, one thread (rendering excluded).
+
+A file is skipped (a line with ``"skipped"`` and the reason) when it cannot be read,
+holds fewer than 6 labelled markers or 100 frames with most of them seen, when
+:meth:`MarkerModel.infer` refuses it (a trial that hardly moves), or when its markers
+sit on no segment (chosen rigid tolerance above 40 mm: data that are not skin markers
+on a body). Files holding the same data as one already run (the c3d.org format
+variants, sample28's corrected copy) are skipped as duplicates.
+
+Usage: ``python benchmarks/identification_real.py [--data ../shared/data] [--seed 1]
+[--learn 0.5] [FILE ...]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from spotlab.core.errors import SpotlabError
+from spotlab.io import labelled_markers, read_trial
+from spotlab.reconstruction.identification import Identifier, MarkerModel
+from spotlab.reconstruction.identification.spreads import distance_range
+from spotlab.testing.trial_scene import trial_scene
+
+MIN_MARKERS, MIN_FRAMES, MAX_TOLERANCE_MM, COMPUTED_MM = 6, 100, 40.0, 0.5
+
+
+def trial_data(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
+    """Labels, trajectories (F, M, 3) over the frames where 80 % of the markers are
+    seen (first to last such frame), and the frame rate; ValueError if unsuitable."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        trial = read_trial(path)
+    labels, X = labelled_markers(trial, path)
+    measured = ~computed_points(X)
+    labels = tuple(name for name, keep in zip(labels, measured, strict=True) if keep)
+    X = X[:, measured]
+    if len(labels) < MIN_MARKERS:
+        raise ValueError(f"{len(labels)} labelled markers")
+    seen = np.isfinite(X).all(axis=2).mean(axis=1) >= 0.8
+    if seen.sum() < MIN_FRAMES:
+        raise ValueError(f"{int(seen.sum())} frames with most markers seen")
+    first, last = np.flatnonzero(seen)[[0, -1]]
+    return labels, X[first : last + 1], trial.point_rate
+
+
+#: Identifier options (defaults; tuning experiments change this).
+IDENTIFIER: dict = {}
+
+
+def computed_points(X: np.ndarray) -> np.ndarray:
+    """(M,) True for points rigid to numerical precision with two others (distance
+    spread < 0.5 mm): segment axes or joint centres a program computed (Plug-in Gait
+    ``PELO``/``PELA``..., A.R.T. 6-DOF limbs, Xsens), not markers a camera sees."""
+    lo, hi = distance_range(X)
+    spread = np.nan_to_num(hi - lo, nan=np.inf)
+    np.fill_diagonal(spread, np.inf)
+    return np.asarray((spread < COMPUTED_MM).sum(axis=1) >= 2)
+
+
+def run(path: Path, args: argparse.Namespace) -> dict:
+    """Learn on the first part, identify the rest, score."""
+    labels, X, rate = trial_data(path)
+    F, M = X.shape[:2]
+    h = round(args.learn * F)
+    model = MarkerModel.infer(labels, X[:h])
+    assert model.tolerance_mm is not None
+    if model.tolerance_mm > MAX_TOLERANCE_MM:
+        raise ValueError(f"markers on no segment (rigid tolerance {model.tolerance_mm:.0f} mm)")
+    start = time.perf_counter()
+    scene = trial_scene(X, labels, rate, seed=args.seed)
+    rendered = time.perf_counter() - start
+    identify = Identifier(scene.rig, model, **IDENTIFIER)
+    points = np.full((F - h, M, 3), np.nan)
+    start = time.perf_counter()
+    for k in range(F - h):
+        points[k] = identify(scene.frames[h + k]).points
+    took = time.perf_counter() - start
+    truth = scene.markers_mm[h:]
+    err = np.linalg.norm(points - truth, axis=-1)
+    reported = np.isfinite(err)
+    right = reported & (err < args.tolerance)
+    held = np.isfinite(truth[..., 0])
+    visible = held & (scene.own_blobs[h:] >= 2)
+    n_rep = max(1, int(reported.sum()))
+    per_marker = right.sum(axis=0) / np.maximum(visible.sum(axis=0), 1)
+    worst = np.argsort(per_marker)[:3]
+    return {
+        "benchmark": "identification_real",
+        "trial": str(path),
+        "markers": M,
+        "rate_hz": rate,
+        "frames_learnt": h,
+        "frames_labelled": F - h,
+        "tolerance_mm": round(model.tolerance_mm, 2),
+        "link_spread_mm": round(float(model.link_spread_mm or 0.0), 1),
+        "segments": len(model.segments),
+        "on_segments": int(sum(len(s.markers) for s in model.segments)),
+        "links": len(model.links),
+        "right": round(float(right.sum() / n_rep), 6),
+        "wrong": round(float((reported & ~right).sum() / n_rep), 6),
+        "coverage": round(float(right.sum() / max(1, held.sum())), 5),
+        "coverage_visible": round(float(right[visible].mean()), 5),
+        "visible_share": round(float(visible.sum() / max(1, held.sum())), 5),
+        "worst_markers": {labels[m]: round(float(per_marker[m]), 4) for m in worst},
+        "fps": round((F - h) / took, 1),
+        "render_s": round(rendered, 1),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("files", nargs="*", type=Path, help="trials (default: all in --data)")
+    parser.add_argument("--data", type=Path, default=Path("../shared/data"))
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--learn", type=float, default=0.5, help="share of frames learnt")
+    parser.add_argument("--tolerance", type=float, default=10.0, help="mm")
+    args = parser.parse_args()
+    files = args.files or sorted(
+        p for p in args.data.rglob("*") if p.suffix.lower() in (".c3d", ".trc")
+    )
+    done: dict[str, str] = {}
+    results = []
+    for path in files:
+        try:
+            _, X, _ = trial_data(path)
+            # the c3d.org format variants differ by a scale step (< 0.3 mm)
+            key = f"{X.shape} {np.round(np.nanmean(X, axis=(0, 1)), 0)}"
+            if key in done:
+                raise ValueError(f"same data as {done[key]}")
+            done[key] = str(path)
+            result = run(path, args)
+        except (SpotlabError, ValueError) as exc:
+            print(json.dumps({"trial": str(path), "skipped": " ".join(str(exc).split())}))
+            continue
+        results.append(result)
+        print(json.dumps(result), flush=True)
+    if results:
+        print(
+            json.dumps(
+                {
+                    "summary": True,
+                    "trials": len(results),
+                    "worst_right": min(r["right"] for r in results),
+                    "worst_wrong": max(r["wrong"] for r in results),
+                    "worst_coverage_visible": min(r["coverage_visible"] for r in results),
+                    "min_fps": min(r["fps"] for r in results),
+                }
+            )
+        )
+
+
+if __name__ == "__main__":
+    main()
