@@ -27,7 +27,7 @@ from spotlab.core.errors import RecordingError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.timer import extract_edges
-from spotlab.io.journal import JournalReader
+from spotlab.io.journal import JournalReader, is_journal
 
 TIMER_FAMILY = "timer"
 #: Session metadata key of the timer's input wiring (stream name -> input), written by
@@ -126,6 +126,36 @@ def recorded_wiring(path: str | os.PathLike[str]) -> dict[str, int]:
     return {
         str(k): int(v) for k, v in stored.items() if isinstance(v, int) and not isinstance(v, bool)
     }
+
+
+def recorded_rig(path: str | os.PathLike[str]) -> Path | None:
+    """The rig of the lab file a recording was made with (``spotlab record --lab``), or
+    None when it names none or is not a recording."""
+    if not is_journal(path):
+        return None
+    try:
+        lab = JournalReader(path).session.get("lab")
+    except RecordingError:
+        return None
+    rig = lab.get("rig") if isinstance(lab, dict) else None
+    return Path(rig) if isinstance(rig, str) and rig else None
+
+
+def calibration_for(path: str | os.PathLike[str], given: Path | None) -> Path:
+    """``--calibration`` when given, else the rig the recording's lab file names.
+
+    Raises
+    ------
+    CommandError
+        When neither gives one.
+    """
+    rig = given if given is not None else recorded_rig(path)
+    if rig is None:
+        raise CommandError(
+            f"{path}: reconstructing it needs --calibration RIG.toml (the recording names "
+            "no rig: it was not made with a lab file that has one)"
+        )
+    return rig
 
 
 def effective_wiring(

@@ -18,6 +18,7 @@ import pytest
 
 import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.console.cli import main
+from spotlab.io import read_c3d, read_trc
 from spotlab.io.journal import JournalReader
 from spotlab.io.lab_file import LabFileError, load_lab
 
@@ -247,3 +248,27 @@ def test_ctrl_c_ends_an_open_ended_recording_with_its_summary(
     (stream,) = _info(capsys, out)["streams"]
     assert frames == stream["frames"] > 100 and stream["lost_frames"] == 0
     assert JournalReader(out).complete
+
+
+def test_the_lab_files_rig_reconstructs_its_recordings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rig = tmp_path / "rig.toml"
+    url = f"sim://selspot?seed=3&cameras=3&leds=6&rig_out={rig}"
+    lab = _lab(
+        tmp_path,
+        f'rig = "rig.toml"\n[[device]]\nfamily = "selspot"\nport = "{url}"\n'
+        "cameras = 3\nleds = 6\nrate = 100\n",
+    )
+    out = tmp_path / "rec.spj"
+    _record(capsys, "--lab", lab, "--seconds", 0.5, "--out", out)
+    c3d, trc = tmp_path / "t.c3d", tmp_path / "t.trc"
+    assert main(["export", str(out), "--c3d", str(c3d)]) == 0, capsys.readouterr().err
+    assert main(["reconstruct", str(out), "--out", str(trc)]) == 0, capsys.readouterr().err
+    assert read_c3d(c3d).n_frames == read_trc(trc).n_frames > 30
+    capsys.readouterr()
+    # a recording made without a lab file still needs --calibration
+    plain = tmp_path / "plain.spj"
+    _record(capsys, "sim://selspot?seed=4", "--driver", "selspot", "--seconds", 0.2, "--out", plain)
+    code = main(["reconstruct", str(plain), "--out", str(tmp_path / "p.trc")])
+    _one_error(capsys, code, "--calibration", "names no rig")

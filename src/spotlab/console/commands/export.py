@@ -27,7 +27,12 @@ from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
 from spotlab.console.paths import check_output_paths
-from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
+from spotlab.console.session_times import (
+    calibration_for,
+    parse_wiring,
+    recording_timebase,
+    write_timestamps,
+)
 from spotlab.console.synchronised_export import reconstruct_recording
 from spotlab.console.trajectories import (
     check_outputs,
@@ -48,7 +53,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("file", type=Path, help="RECORDING.spj, TRIAL.c3d or TRIAL.trc")
     p.add_argument("--c3d", type=Path, metavar="OUT", help="write marker trajectories as C3D")
     p.add_argument("--trc", type=Path, metavar="OUT", help="write marker trajectories as TRC")
-    p.add_argument("--calibration", type=Path, help="rig (TOML) to reconstruct a recording")
+    p.add_argument(
+        "--calibration",
+        type=Path,
+        help="rig (TOML) to reconstruct a recording (default for a recording made with "
+        "--lab: the lab file's rig)",
+    )
     p.add_argument(
         "--drop-group",
         action="append",
@@ -168,11 +178,12 @@ def run(args: argparse.Namespace) -> int:
             "rate_hz": trial.point_rate,
         }
     elif suffix in OBSERVATION_SUFFIXES:
-        if args.calibration is None:
+        if args.calibration is None and suffix != ".spj":
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")
         if suffix == ".spj":
             result = reconstruct_recording(
-                path, args.calibration, sync=args.sync, wiring=parse_wiring(args.wiring),
+                path, calibration_for(path, args.calibration), sync=args.sync,
+                wiring=parse_wiring(args.wiring),
                 rate_hz=args.rate, slot_correction=not args.no_slot_correction,
             )  # fmt: skip
         else:
