@@ -16,8 +16,8 @@ samples, for scale).
 
 Signal: sin(2 pi 0.5 t) + 0.01 normal noise at 100 Hz.
 
-Usage: ``python benchmarks/spline_gcv.py [--sizes 10000 100000 1000000] [--limit 60]
-[--repeat 1]``
+Usage: ``python benchmarks/spline_gcv.py [--sizes 1000 10000 100000 1000000] [--limit 60]
+[--repeat 1] [--tools spotlab gcvspline scipy]``
 """
 
 from __future__ import annotations
@@ -98,9 +98,12 @@ def _child(tool: str, n: int) -> dict[str, object] | None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1_000, 10_000, 100_000, 1_000_000])
     parser.add_argument("--limit", type=float, default=60.0)
     parser.add_argument("--repeat", type=int, default=1, help="fits per tool and size (best)")
+    parser.add_argument(
+        "--tools", nargs="+", choices=TOOLS, default=list(TOOLS), help="tools to run (all)"
+    )
     parser.add_argument("--child", nargs=2, metavar=("TOOL", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
@@ -109,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     scipy_rate = None  # s per sample, from the last size SciPy ran
     for n in args.sizes:
         row: dict[str, object] = {"bench": "spline_gcv", "n": n, "data_mb": n * 8 / 1e6}
-        for tool in TOOLS:
+        for tool in args.tools:
             if tool == "scipy" and scipy_rate is not None and scipy_rate * n > args.limit:
                 row["scipy_skipped"] = f"extrapolated {scipy_rate * n:.0f} s > {args.limit:g} s"
                 continue

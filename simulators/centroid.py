@@ -28,7 +28,8 @@ import numpy.typing as npt
 from spotlab.geometry import Rig
 from spotlab.simulators import centroid_wire as cw
 from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_cameras, sight_blocked
-from spotlab.simulators.centroid_body import GaitBody, carried_by, segment_capsules
+from spotlab.simulators.centroid_body import carried_by, segment_capsules
+from spotlab.simulators.centroid_poses import body_for
 from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
@@ -195,7 +196,7 @@ class CentroidDevice(SelspotDevice):
         The cameras (default: :func:`spotlab.simulators.rigs.ring_rig`: 8 of 1280 x 1024).
     markers : int
         Markers: the first of the 40 of :class:`GaitBody`, then static reference
-        markers beyond 40.
+        markers beyond 40 (ignored with ``motion``).
     model : BlobModel, optional
         Marker size, noise, ghosts.
     clock : DeviceClock, optional
@@ -209,6 +210,12 @@ class CentroidDevice(SelspotDevice):
         Sunlit cameras and cameras offline, in seconds after ``START:``.
     occlusion : bool
         Body segments hide markers.
+    body_motion : str
+        What the body does: ``walk``, ``static`` or ``rom``
+        (:func:`spotlab.simulators.centroid_poses.body_for`).
+    motion : Motion, optional
+        What the cameras see instead of the walking body: its markers, labels and
+        positions (a wand dance, a static L-frame); no body occludes them.
     serial, seed, fault_log, default_rate_hz, now_ns, lab :
         As :class:`SelspotDevice`.
     truth : path, optional
@@ -234,6 +241,8 @@ class CentroidDevice(SelspotDevice):
         default_rate_hz: float = 100.0,
         now_ns: int | None = None,
         lab: LabPublisher | None = None,
+        body_motion: str = "walk",
+        motion: Motion | None = None,
     ) -> None:
         self.rig = rig if rig is not None else reference_rig(8)
         n_cams = len(self.rig.cameras)
@@ -242,11 +251,16 @@ class CentroidDevice(SelspotDevice):
         if markers < 1:
             raise ValueError(f"markers must be >= 1, got {markers}")
         self.model = model if model is not None else BlobModel()
-        self.body = GaitBody.for_seed(seed)
+        self.body = body_for(body_motion, seed)
+        self.motion = motion
+        if motion is not None:
+            markers = motion.n_markers
         self.n_markers = markers
-        self.labels = (self.body.labels + reference_markers(max(markers - 40, 0), seed).labels)[
-            :markers
-        ]
+        self.labels = (
+            motion.labels
+            if motion is not None
+            else (self.body.labels + reference_markers(max(markers - 40, 0), seed).labels)[:markers]
+        )
         self._static: Motion = reference_markers(max(markers - 40, 1), seed)
         self.sunlight = tuple(sunlight)
         self.camera_off = tuple(camera_off)
@@ -282,6 +296,10 @@ class CentroidDevice(SelspotDevice):
     def positions(self, scene_s: F64) -> F64:
         """All emitted markers at times (K,) s -> (K, M, 3) mm."""
         t = np.asarray(scene_s, dtype=np.float64)
+        if self.motion is not None:
+            k, m = t.size, self.n_markers
+            pos = self.motion.sample(np.repeat(t, m), np.tile(np.arange(m, dtype=np.int64), k))
+            return np.asarray(pos.reshape(k, m, 3))
         X = self.body.all_markers(t)
         if self.n_markers <= 40:
             return X[:, : self.n_markers]
@@ -291,7 +309,7 @@ class CentroidDevice(SelspotDevice):
     def occluded(self, X: F64, cameras: list[int]) -> npt.NDArray[np.bool_]:
         """(n, M): markers ``X`` (M, 3) hidden by body segments from these cameras."""
         m = X.shape[0]
-        if not self.occlusion or m < 40:
+        if not self.occlusion or m < 40 or self.motion is not None:
             return np.zeros((len(cameras), m), dtype=bool)
         on = np.zeros((m, self._on_capsule.shape[1]), dtype=bool)
         on[:40] = self._on_capsule

@@ -132,7 +132,12 @@ class GaitBody(Motion):
 
     def all_markers(self, t: F64) -> F64:
         """All 40 markers at times (K,) -> (K, 40, 3) mm."""
-        g = self._gait._all(np.asarray(t, dtype=np.float64))
+        t = np.asarray(t, dtype=np.float64)
+        return self.dress(self._gait._all(t), t)
+
+    def dress(self, g: F64, t: F64) -> F64:
+        """The 40 markers from the 19 of :class:`Gait`'s body ``g`` (K, 19, 3) mm at times
+        (K,) s: the 21 placed between them, then the subject (size, placement, skin)."""
         p = {name: g[:, i] for i, name in enumerate(GAIT_LABELS)}
         left = p["LASI"] - p["RASI"]
         left /= np.linalg.norm(left, axis=1, keepdims=True)

@@ -11,14 +11,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
 from spotlab.simulators.blobs import BlobModel
 from spotlab.simulators.centroid import CentroidDevice, Episode
+from spotlab.simulators.centroid_poses import BODY_MOTIONS
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import FaultInjector
 from spotlab.simulators.lab import LabPublisher, lab_dir
+from spotlab.simulators.motions import Motion, WandDance, reference_markers
 from spotlab.simulators.rigs import ring_rig
 from spotlab.simulators.service import (
     _URL_SHORT,
@@ -65,13 +67,26 @@ class CentroidSimOptions:
         Cameras: the first of :func:`ring_rig` (8 cameras 1280 x 1024 on a 4 m ring), or
         a ring of that many when more than 8 (1-16).
     markers : int
-        Markers (the 40 of the walking body first, static ones beyond).
+        Markers: ``walk``: the 40 of the walking body first, static ones beyond;
+        ``wand``: on the wand (2 or 3); ``lframe``: the L-frame's 4 first (3-512).
+    motion : str
+        ``walk`` (the 40-marker body walking), ``static`` (standing still), ``rom``
+        (range of motion, :mod:`spotlab.simulators.centroid_poses`), ``wand`` (a passive
+        wand waved through the volume, :data:`WAND_VOLUME`) or ``lframe`` (a static
+        L-frame on the floor,
+        :func:`~spotlab.simulators.motions.reference_markers`).
+    wand_length_mm : float
+        Distance between the wand's end markers (mm); a 3-marker wand's middle marker
+        sits :data:`WAND_MIDDLE` of it from end A.
     rate_hz : float
         Frame rate after reset or ``INIT:``.
     seed : int
         Seed of noise, ghosts, camera clocks and random faults.
     truth, fault_log, rig_out : Path, optional
         Truth npz, fault-log JSON, and the true calibration (``Rig.save`` TOML).
+    frame_points_out : Path, optional
+        CSV (``X,Y,Z`` mm, one row per marker) of the L-frame's published marker
+        coordinates, as its maker states them.
     faults : str
         Link fault schedule (see :mod:`spotlab.simulators.faults`).
     fault_rate : float
@@ -96,11 +111,14 @@ class CentroidSimOptions:
 
     cameras: int = 8
     markers: int = 40
+    motion: str = "walk"
+    wand_length_mm: float = 500.0
     rate_hz: float = 100.0
     seed: int = 0
     truth: Path | None = None
     fault_log: Path | None = None
     rig_out: Path | None = None
+    frame_points_out: Path | None = None
     faults: str = ""
     fault_rate: float = 0.0
     clock_offset_s: float = 0.0
@@ -120,8 +138,18 @@ class CentroidSimOptions:
         """Raise ValueError naming the first bad option."""
         if not 1 <= self.cameras <= 16:
             raise ValueError(f"cameras must be 1 to 16, got {self.cameras}")
-        if not 1 <= self.markers <= 512:
-            raise ValueError(f"markers must be 1 to 512, got {self.markers}")
+        if self.motion not in CENTROID_MOTIONS:
+            raise ValueError(
+                f"motion {self.motion!r}: expected one of {', '.join(CENTROID_MOTIONS)}"
+            )
+        low = {"wand": 2, "lframe": 3}.get(self.motion, 1)
+        high = 3 if self.motion == "wand" else 512
+        if not low <= self.markers <= high:
+            raise ValueError(
+                f"markers must be {low} to {high} for the {self.motion} motion, got {self.markers}"
+            )
+        if not 50.0 <= self.wand_length_mm <= 3000.0:
+            raise ValueError(f"wand length must be 50 to 3000 mm, got {self.wand_length_mm:g}")
         if not 1.0 <= self.rate_hz <= 2000.0:
             raise ValueError(f"rate must be 1 Hz to 2 kHz, got {self.rate_hz}")
         if not 0.0 <= self.ghost_rate <= 1.0:
@@ -134,6 +162,41 @@ class CentroidSimOptions:
                     raise ValueError(f"{what}: camera {e.camera} of {self.cameras} (0-based)")
 
 
+#: Scenes of the centroid simulator.
+CENTROID_MOTIONS = (*BODY_MOTIONS, "wand", "lframe")
+#: Where the wand goes (:class:`WandDance`, mm): the operator walks a 3 x 3 m area and
+#: sweeps the wand from 0.2 to 2 m high. The wand is waved 2.5 times as fast as the PSD
+#: simulator's (``tempo``): a few seconds cover the volume and most of every camera's image.
+WAND_VOLUME: dict[str, Any] = {
+    "centre": (0.0, 0.0, 1100.0), "walk": 1000.0, "reach": 500.0, "extent_z": 900.0,
+    "radius": 1500.0,
+}  # fmt: skip
+WAND_TEMPO = 2.5
+#: A 3-marker wand's middle marker, from end A, in wand lengths (off-centre: the
+#: ends are told apart).
+WAND_MIDDLE = 0.4
+#: Markers of the L-frame (``lframe``, :func:`reference_markers`).
+LFRAME_MARKERS = 4
+
+
+def centroid_motion(options: CentroidSimOptions) -> Motion | None:
+    """The scene of ``options.motion`` (None: the walking body of :class:`CentroidDevice`)."""
+    if options.motion == "wand":
+        return WandDance(
+            options.wand_length_mm, **WAND_VOLUME, seed=options.seed, tempo=WAND_TEMPO,
+            middle_mm=WAND_MIDDLE * options.wand_length_mm if options.markers == 3 else None,
+        )  # fmt: skip
+    if options.motion == "lframe":
+        return reference_markers(options.markers, options.seed)
+    return None
+
+
+def write_frame_points(path: Path) -> None:
+    """The L-frame's published marker coordinates as CSV (``X,Y,Z`` mm, one row each)."""
+    points = reference_markers(LFRAME_MARKERS).points
+    path.write_text("X,Y,Z\n" + "".join(f"{x:g},{y:g},{z:g}\n" for x, y, z in points))
+
+
 def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None) -> CentroidDevice:
     """A powered-up simulated CEN hub (and its rig written to ``rig_out``)."""
     options.validate()
@@ -141,6 +204,7 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
         offset_s=options.clock_offset_s, drift_ppm=options.clock_drift_ppm,
         jitter_s=options.clock_jitter_s, seed=options.seed, epoch_ns=now_ns,
     )  # fmt: skip
+    # The rig does not depend on the seed: a lab's cameras stay put between trials.
     rig = ring_rig(max(options.cameras, 8))
     if options.cameras < 8:
         rig = type(rig)(rig.cameras[: options.cameras])
@@ -155,15 +219,19 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
         camera_off=parse_episodes(options.camera_off, "camera-off"),
         occlusion=bool(options.occlusion), serial=options.serial, seed=options.seed,
         truth=options.truth, fault_log=options.fault_log, default_rate_hz=options.rate_hz,
+        body_motion=options.motion if options.motion in BODY_MOTIONS else "walk",
         now_ns=clock.epoch_ns,
         lab=(
             LabPublisher(lab_dir(options.lab), options.lab_name, clock, FRAME_PULSE_WIDTH_S)
             if options.lab_name
             else None
         ),
+        motion=centroid_motion(options),
     )  # fmt: skip
     if options.rig_out is not None:
         rig.save(options.rig_out)
+    if options.frame_points_out is not None:
+        write_frame_points(options.frame_points_out)
     return device
 
 

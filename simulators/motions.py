@@ -156,41 +156,83 @@ class Delayed(Motion):
 
 
 class WandDance(Motion):
-    """Two LEDs ``length`` mm apart on a wand waved through the volume.
+    """Two or three markers on a wand waved through the volume as an operator does.
 
-    The wand centre follows a sum of slow sines inside ``centre +- extent``;
-    the wand turns about the vertical and tilts up and down, so that it covers
-    many directions. Marker 0 and 1 are the wand ends.
+    The operator walks slowly through the capture volume (a Lissajous path of
+    ``walk`` mm amplitude, 0.05-0.09 Hz) while sweeping the wand with the arm, quickly
+    (``reach`` mm sideways at 0.35-0.55 Hz) and from near the floor to above the head
+    (``centre[2] +- extent_z``, 0.18-0.28 Hz), turning and tilting it so that it
+    points in many directions. In 20 s the wand sweeps most of the volume the cameras
+    look at. Marker 0 and 1 are the wand ends (``WAND_A``, ``WAND_B``, ``length`` mm
+    apart); with ``middle_mm``, marker 2 (``WAND_M``) sits on the wand ``middle_mm``
+    from end A, as on a passive three-marker wand.
+
+    Parameters
+    ----------
+    length : float
+        Distance between the ends (mm).
+    centre : tuple of 3 floats
+        Middle of the volume (mm).
+    walk, reach, extent_z, radius : float
+        The operator's path amplitude, the arm's sideways sweep, the wand's height
+        sweep, and the circle the operator stays in (mm).
+    seed : int
+        Seed of the frequencies and phases.
+    middle_mm : float, optional
+        Distance of a third, middle marker from end A (mm), ``0 < middle_mm < length``.
+    tempo : float
+        How fast the operator waves: the motion at time ``t`` is the tempo-1 motion's
+        at ``tempo * t``.
     """
 
     def __init__(
         self,
         length: float = 500.0,
         centre: tuple[float, float, float] = (0.0, 0.0, 1000.0),
-        extent: tuple[float, float, float] = (800.0, 800.0, 450.0),
+        walk: float = 1100.0,
+        reach: float = 500.0,
+        extent_z: float = 700.0,
+        radius: float = 1600.0,
         seed: int = 0,
+        middle_mm: float | None = None,
+        tempo: float = 1.0,
     ) -> None:
         rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3A4D]))
         self.length = float(length)
+        self.radius = float(radius)
         self.centre = np.asarray(centre, dtype=np.float64)
-        self.extent = np.asarray(extent, dtype=np.float64)
-        self._freq = rng.uniform(0.06, 0.25, size=(2, 3))  # Hz, two sines per axis
-        self._phase = rng.uniform(0, 2 * np.pi, size=(2, 3))
+        self._amp = np.array([walk, walk, reach, reach, extent_z])
+        self._freq = np.concatenate(
+            [rng.uniform(0.05, 0.09, 2), rng.uniform(0.35, 0.55, 2), rng.uniform(0.18, 0.28, 1)]
+        )  # Hz: walk x, y; arm x, y; arm up and down
+        self._phase = rng.uniform(0, 2 * np.pi, size=5)
         self._yaw_rate = rng.uniform(0.5, 0.9) * rng.choice([-1.0, 1.0])  # rad/s
         self._tilt = (rng.uniform(0.2, 0.4), rng.uniform(0, 2 * np.pi))  # Hz, phase
-        self.n_markers = 2
-        self.labels = ("WAND_A", "WAND_B")
+        if middle_mm is not None and not 0.0 < middle_mm < self.length:
+            raise ValueError(f"the middle marker must lie between the ends, got {middle_mm} mm")
+        self.tempo = float(tempo)
+        # Position of each marker along the wand from its centre, in lengths.
+        self._along = np.array(
+            [-0.5, 0.5] + ([] if middle_mm is None else [-0.5 + middle_mm / length])
+        )
+        self.n_markers = self._along.size
+        self.labels = ("WAND_A", "WAND_B", "WAND_M")[: self.n_markers]
 
     def sample(self, times: F64, markers: I64) -> F64:
-        t = np.asarray(times, dtype=np.float64)[:, None]
-        w = 2 * np.pi * self._freq
-        wave = 0.6 * np.sin(w[0] * t + self._phase[0]) + 0.4 * np.sin(w[1] * t + self._phase[1])
-        c = self.centre + self.extent * wave
-        yaw = self._yaw_rate * t[:, 0] + 0.5 * np.sin(0.31 * t[:, 0])
-        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t[:, 0] + self._tilt[1])
+        t = self.tempo * np.asarray(times, dtype=np.float64)
+        wave = self._amp * np.sin(2 * np.pi * self._freq * t[:, None] + self._phase)
+        xy = np.stack([wave[:, 0] + wave[:, 2], wave[:, 1] + wave[:, 3]], axis=1)
+        # The operator keeps inside a circle of radius ``radius``, as the floor space
+        # between the cameras allows (soft limit: smooth, never beyond it).
+        r = np.linalg.norm(xy, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            xy = np.where(r > 0, xy * (self.radius * np.tanh(r / self.radius) / r), xy)
+        c = self.centre + np.column_stack([xy, wave[:, 4]])
+        yaw = self._yaw_rate * t + 0.5 * np.sin(0.31 * t)
+        pitch = 0.7 * np.sin(2 * np.pi * self._tilt[0] * t + self._tilt[1])
         d = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], 1)
-        sign = np.where(np.asarray(markers) == 0, -0.5, 0.5)[:, None]
-        return np.asarray(c + sign * self.length * d)
+        along = self._along[np.asarray(markers, dtype=np.int64)][:, None]
+        return np.asarray(c + along * self.length * d)
 
 
 def _rotations(axis: F64, angle: F64) -> F64:
@@ -247,6 +289,73 @@ GAIT_LABELS = (
 )  # fmt: skip
 
 
+def _abduct(f: F64, lat: float, lt: float, u: F64, top: F64, ab: F64) -> tuple[F64, F64, F64]:
+    """A limb point (forward f, lateral ``lat * lt``, up u) turned outwards by ``ab``
+    (rad) about the forward axis through the limb's top at height ``top``."""
+    rel = u - top
+    return f, lat * (lt - rel * np.sin(ab)), top + rel * np.cos(ab)
+
+
+def body_pose(
+    base: F64, fwd: F64, pel_z: F64, hip: F64, knee: F64, foot: F64, arm: F64,
+    *, elbow: F64 | float = 0.3, hip_abd: F64 | float = 0.0, arm_abd: F64 | float = 0.0,
+) -> F64:  # fmt: skip
+    """The 19 markers of :class:`Gait`'s body in a pose -> (K, 19, 3) mm.
+
+    Parameters
+    ----------
+    base : ndarray, shape (K, 2)
+        Floor point below the pelvis (mm).
+    fwd : ndarray, shape (K, 2)
+        Unit heading on the floor.
+    pel_z : ndarray, shape (K,)
+        Pelvis height (mm).
+    hip, knee, foot, arm : ndarray, shape (K, 2)
+        Left and right joint angles (rad): hip flexion, knee flexion, foot pitch (toe
+        down), shoulder flexion (arm forward).
+    elbow, hip_abd, arm_abd : ndarray, shape (K, 2), or float
+        Forearm flexion relative to the upper arm, hip and shoulder abduction (rad).
+    """
+    left = np.stack([-fwd[:, 1], fwd[:, 0]], 1)
+    zero = np.zeros(base.shape[0])
+    elbow, hip_abd, arm_abd = (np.broadcast_to(np.asarray(v, np.float64), hip.shape)
+                               for v in (elbow, hip_abd, arm_abd))  # fmt: skip
+    cols: dict[str, tuple[F64, F64, F64]] = {}  # (forward, left, up) in mm
+    for k, (side, lat) in enumerate((("L", 1.0), ("R", -1.0))):
+        h, kn, ft, ar = hip[:, k], knee[:, k], foot[:, k], arm[:, k]
+        hip_u, sh_u = pel_z - 80, pel_z + 480
+
+        kf, ku = 450 * np.sin(h), hip_u - 450 * np.cos(h)
+        shank = h - kn
+        af, au = kf + 430 * np.sin(shank), ku - 430 * np.cos(shank)
+        ab = hip_abd[:, k]
+        cols[side + "KNE"] = _abduct(kf, lat, 95, ku, hip_u, ab)
+        cols[side + "ANK"] = _abduct(af, lat, 90, au, hip_u, ab)
+        cols[side + "HEE"] = _abduct(
+            af - 50 * np.cos(ft), lat, 90, au - 40 + 50 * np.sin(ft), hip_u, ab
+        )
+        cols[side + "TOE"] = _abduct(
+            af + 140 * np.cos(ft), lat, 85, au - 50 - 140 * np.sin(ft), hip_u, ab
+        )
+        ef, eu = 300 * np.sin(ar), sh_u - 300 * np.cos(ar)
+        fa = ar + elbow[:, k]
+        ab = arm_abd[:, k]
+        cols[side + "SHO"] = (zero, lat * 180 + zero, sh_u)
+        cols[side + "ELB"] = _abduct(ef, lat, 200, eu, sh_u, ab)
+        cols[side + "WRA"] = _abduct(
+            ef + 260 * np.sin(fa), lat, 190, eu - 260 * np.cos(fa), sh_u, ab
+        )
+        cols[side + "ASI"] = (100 + zero, lat * 120 + zero, pel_z)
+    cols["SACR"] = (-100 + zero, zero, pel_z + 10)
+    cols["C7"] = (-40 + zero, zero, pel_z + 520)
+    cols["HEAD"] = (60 + zero, zero, pel_z + 730)
+    f = np.stack([cols[k][0] for k in GAIT_LABELS], 1)
+    lft = np.stack([cols[k][1] for k in GAIT_LABELS], 1)
+    up = np.maximum(np.stack([cols[k][2] for k in GAIT_LABELS], 1), 5.0)
+    xy = base[:, None, :] + f[..., None] * fwd[:, None, :] + lft[..., None] * left[:, None, :]
+    return np.concatenate([xy, up[..., None]], axis=2)
+
+
 class Gait(Motion):
     """A body walking on a circle of ``radius`` mm at ``speed`` m/s, with 19 surface markers.
 
@@ -267,49 +376,14 @@ class Gait(Motion):
         a = self.speed * t / self.radius
         base = np.stack([self.radius * np.cos(a), self.radius * np.sin(a)], 1)
         fwd = np.stack([-np.sin(a), np.cos(a)], 1)
-        left = -np.stack([np.cos(a), np.sin(a)], 1)
         ph = 2 * np.pi * self.stride_hz * t
-        pel_z = 950.0 + 15.0 * np.cos(2 * ph)
-        cols: dict[str, tuple[F64, F64, F64]] = {}  # (forward, left, up) in mm
-        zero = np.zeros_like(t)
-        for side, lat, p in (("L", 1.0, ph), ("R", -1.0, ph + np.pi)):
-            hip = 0.4 * np.sin(p)
-            knee = 0.55 * (1 - np.cos(p + 0.6)) / 2
-            kf, ku = 450 * np.sin(hip), pel_z - 80 - 450 * np.cos(hip)
-            shank = hip - knee
-            af, au = kf + 430 * np.sin(shank), ku - 430 * np.cos(shank)
-            foot = 0.5 * shank
-            cols[side + "KNE"] = (kf, lat * 95 + zero, ku)
-            cols[side + "ANK"] = (af, lat * 90 + zero, au)
-            cols[side + "HEE"] = (
-                af - 50 * np.cos(foot),
-                lat * 90 + zero,
-                au - 40 + 50 * np.sin(foot),
-            )
-            cols[side + "TOE"] = (
-                af + 140 * np.cos(foot),
-                lat * 85 + zero,
-                au - 50 - 140 * np.sin(foot),
-            )
-            arm = -0.35 * np.sin(p)
-            sh_u = pel_z + 480
-            ef, eu = 300 * np.sin(arm), sh_u - 300 * np.cos(arm)
-            cols[side + "SHO"] = (zero, lat * 180 + zero, sh_u)
-            cols[side + "ELB"] = (ef, lat * 200 + zero, eu)
-            cols[side + "WRA"] = (
-                ef + 260 * np.sin(arm + 0.3),
-                lat * 190 + zero,
-                eu - 260 * np.cos(arm + 0.3),
-            )
-            cols[side + "ASI"] = (100 + zero, lat * 120 + zero, pel_z)
-        cols["SACR"] = (-100 + zero, zero, pel_z + 10)
-        cols["C7"] = (-40 + zero, zero, pel_z + 520)
-        cols["HEAD"] = (60 + zero, zero, pel_z + 730)
-        f = np.stack([cols[k][0] for k in GAIT_LABELS], 1)
-        lft = np.stack([cols[k][1] for k in GAIT_LABELS], 1)
-        up = np.maximum(np.stack([cols[k][2] for k in GAIT_LABELS], 1), 5.0)
-        xy = base[:, None, :] + f[..., None] * fwd[:, None, :] + lft[..., None] * left[:, None, :]
-        return np.concatenate([xy, up[..., None]], axis=2)
+        p = np.stack([ph, ph + np.pi], 1)  # (K, 2): left, right
+        hip = 0.4 * np.sin(p)
+        knee = 0.55 * (1 - np.cos(p + 0.6)) / 2
+        return body_pose(
+            base, fwd, 950.0 + 15.0 * np.cos(2 * ph), hip, knee, 0.5 * (hip - knee),
+            -0.35 * np.sin(p),
+        )  # fmt: skip
 
     def sample(self, times: F64, markers: I64) -> F64:
         t = np.asarray(times, dtype=np.float64)
@@ -436,3 +510,30 @@ def make_motion(name: str | Path, n_markers: int, seed: int = 0) -> Motion:
     if base.n_markers >= n_markers:
         return base if base.n_markers == n_markers else Subset(base, n_markers)
     return Concat([base, reference_markers(n_markers - base.n_markers, seed)])
+
+
+def static_points(motion: Motion) -> list[tuple[int, str, F64]]:
+    """The static markers of a motion with their known coordinates.
+
+    Parameters
+    ----------
+    motion : Motion
+        As :func:`make_motion` builds it.
+
+    Returns
+    -------
+    list of (int, str, ndarray)
+        Marker index (0-based, the LED id), label and position (3,) in mm, for every
+        marker that stands still (the L-frame and the other reference markers), in
+        marker order. Empty when the motion has none.
+    """
+    if isinstance(motion, StaticMarkers):
+        return [(i, motion.labels[i], motion.points[i]) for i in range(motion.n_markers)]
+    if isinstance(motion, Concat):
+        out = []
+        for start, part in zip(motion._starts, motion.parts, strict=False):
+            out += [(int(start) + i, lab, p) for i, lab, p in static_points(part)]
+        return out
+    if isinstance(motion, Subset):
+        return [item for item in static_points(motion.motion) if item[0] < motion.n_markers]
+    return []

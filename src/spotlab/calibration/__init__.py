@@ -10,7 +10,8 @@ from spotlab.calibration.dlt import (
 from spotlab.calibration.iac import IacResult, intrinsics_from_orthogonal_vanishing_points
 from spotlab.calibration.linearisation import DetectorLinearisation, fit_linearisation
 from spotlab.calibration.planar import PlanarCalibration, calibrate_intrinsics, fit_homography
-from spotlab.calibration.report import quality_report, write_report_figure
+from spotlab.calibration.report import quality_report
+from spotlab.calibration.report_figure import write_report_figure
 from spotlab.calibration.smac import SmacCalibration, smac_calibrate
 from spotlab.calibration.vanishing import vanishing_point
 from spotlab.calibration.wand import WandCalibration, wand_calibrate

@@ -31,7 +31,15 @@ from spotlab.calibration._camera_block import (
     rotate_blocks,
 )
 
-__all__ = ["BundleProblem", "BundleState", "adjust", "huber_weights"]
+__all__ = [
+    "BundleProblem",
+    "BundleState",
+    "adjust",
+    "huber_weights",
+    "reduced_camera_system",
+    "robust_cost",
+    "robust_sigma",
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -95,6 +103,13 @@ class BundleProblem:
         self.use = seen if self.use.shape != seen.shape else self.use & seen
 
 
+def robust_sigma(r: FloatArray) -> float:
+    """Robust scale (px) of 2-D residuals: the median norm of a circular normal is 1.1774 sigma."""
+    norm = np.linalg.norm(r, axis=-1)
+    norm = norm[np.isfinite(norm)]
+    return float(np.median(norm) / 1.1774) if norm.size else np.nan
+
+
 def huber_weights(norm: FloatArray, k: float) -> FloatArray:
     """IRLS weights of Huber's loss on residual norms: 1 inside ``k``, ``k/|r|`` beyond."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -134,15 +149,16 @@ def residuals(problem: BundleProblem, state: BundleState) -> tuple[FloatArray, F
     return r, fuv.reshape(C, P, 2) - problem.frame_uv
 
 
-def _cost(problem: BundleProblem, state: BundleState) -> float:
+def robust_cost(problem: BundleProblem, state: BundleState) -> float:
+    """Huber cost (px^2) of the wand and (weighted) reference-object residuals."""
     r, fr = residuals(problem, state)
     norm = np.linalg.norm(r, axis=-1)
     fnorm = np.linalg.norm(fr, axis=-1)
     wand = _huber_cost(norm[problem.use], problem.huber_px)
     fseen = np.isfinite(fnorm)
     frame = problem.frame_weight * _huber_cost(fnorm[fseen], problem.huber_px)
-    cost = wand + frame
-    return cost if np.isfinite(cost) else np.inf
+    total = wand + frame
+    return total if np.isfinite(total) else np.inf
 
 
 def _normal_equations(
@@ -194,6 +210,35 @@ def _normal_equations(
         np.add.at(U, cc[seen], np.einsum("nrp,nrq->npq", pjb, pjb))
         np.add.at(g_b, cc[seen], np.einsum("nrp,nr->np", pjb, fr))
     return U, W, V, g_b, g_f, basis
+
+
+def reduced_camera_system(
+    problem: BundleProblem, state: BundleState
+) -> tuple[FloatArray, FloatArray]:
+    """The camera block of the normal equations with the wand frames eliminated (Schur).
+
+    Returns
+    -------
+    S : ndarray, shape (15 C, 15 C)
+        ``J'J`` of the (Huber-weighted) reprojection residuals with respect to every
+        camera parameter, all frame unknowns marginalised: ``U - W V^-1 W'``. Its
+        inverse, restricted to the adjusted parameters, is their covariance in units of
+        the image-point variance (px^2).
+    g : ndarray, shape (15 C,)
+        The reduced gradient ``J'r`` (px), frames marginalised: a Gauss-Newton step of
+        the adjusted parameters is ``-S^-1 g`` restricted to them.
+    """
+    U, W, V, g_b, g_f, _ = _normal_equations(problem, state)
+    F, C = W.shape[:2]
+    Vinv = np.linalg.pinv(V)
+    Y = np.einsum("fcpq,fqs->fcps", W, Vinv)
+    n = C * BLOCK
+    Ym = Y.transpose(1, 2, 0, 3).reshape(n, F * 5)
+    S = -(Ym @ W.transpose(1, 2, 0, 3).reshape(n, F * 5).T)
+    for c in range(C):
+        S[c * BLOCK : (c + 1) * BLOCK, c * BLOCK : (c + 1) * BLOCK] += U[c]
+    g = g_b.ravel() - Ym @ g_f.ravel()
+    return 0.5 * (S + S.T), g
 
 
 @dataclass
@@ -268,7 +313,7 @@ def adjust(
     Returns the adjusted state and a log; stops when the relative cost decrease of an
     accepted step falls below ``tolerance`` or after ``max_iterations`` linearisations.
     """
-    log = AdjustmentLog(initial_cost=_cost(problem, state))
+    log = AdjustmentLog(initial_cost=robust_cost(problem, state))
     cost = log.initial_cost
     lam = 1e-3
     for it in range(max_iterations):
@@ -279,7 +324,7 @@ def adjust(
             step = _step(problem, U, W, V, g_b, g_f, lam)
             if step is not None:
                 trial = _apply(state, *step, basis)
-                trial_cost = _cost(problem, trial)
+                trial_cost = robust_cost(problem, trial)
                 if trial_cost < cost:
                     improved = True
                     break

@@ -9,7 +9,7 @@ covered; and a plain verdict with its reasons.
 
 from __future__ import annotations
 
-from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -18,19 +18,30 @@ from numpy.typing import NDArray
 from spotlab.calibration._rays import intersect
 from spotlab.geometry import Rig
 
-__all__ = ["VERDICT_LIMITS", "quality_report", "write_report_figure"]
+__all__ = [
+    "VERDICT_LIMITS",
+    "VERDICT_WIDTH",
+    "image_coverage",
+    "lens_report",
+    "quality_report",
+    "wand_lengths",
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-#: Verdict thresholds: (reprojection RMS px, wand SD as a fraction of its length,
-#: image coverage fraction) for "good" and for "acceptable".
+#: Verdict thresholds: (reprojection RMS in px of a 1280 px wide image, wand SD as a
+#: fraction of its length, image coverage fraction) for "good" and for "acceptable".
+#: The RMS limit scales with the image width (``width / 1280``): 0.5 px on a 1280 px
+#: camera is the same fraction of the field as 1.6 counts on a 4096-count PSD.
 VERDICT_LIMITS = {"good": (0.5, 0.002, 0.4), "acceptable": (1.5, 0.01, 0.2)}
+#: Image width (px) at which the RMS limits of :data:`VERDICT_LIMITS` hold as written.
+VERDICT_WIDTH = 1280
 
 _GRID = (16, 12)
 
 
-def _coverage(uv: FloatArray, size: tuple[int, int]) -> float:
+def image_coverage(uv: FloatArray, size: tuple[int, int]) -> float:
     """Fraction of a 16 x 12 grid of image cells holding at least one observation."""
     uv = uv[np.all(np.isfinite(uv), axis=-1)]
     if uv.size == 0:
@@ -63,6 +74,7 @@ def quality_report(
     wand_residuals: FloatArray,
     frame_residuals: FloatArray,
     inliers: BoolArray,
+    units: str = "px",
 ) -> dict[str, Any]:
     """Quality figures of a wand calibration.
 
@@ -80,6 +92,9 @@ def quality_report(
         Residuals (px) of the reference object's markers.
     inliers : ndarray of bool, shape (F, C, 2)
         Observations kept after outlier rejection.
+    units : str
+        Name of the image unit (``"px"``, or ``"counts"`` for a PSD detector); the
+        report's ``*_px`` figures are in this unit (``report["image_units"]``).
 
     Returns
     -------
@@ -101,7 +116,8 @@ def quality_report(
                 "frame_rms_px": _rms(frame_residuals[c]),
                 "observations": int(np.count_nonzero(inliers[:, c])),
                 "rejected": int(np.count_nonzero(seen[:, c] & ~inliers[:, c])),
-                "image_coverage": _coverage(wand[:, c].reshape(-1, 2), cam.size),
+                "image_coverage": image_coverage(wand[:, c].reshape(-1, 2), cam.size),
+                "image_width": int(cam.size[0]),
             }
         )
     lengths = wand_lengths(rig, wand, inliers)
@@ -138,11 +154,12 @@ def quality_report(
         "reprojection_rms_px": overall,
         "wand": wand_stats,
         "volume": volume,
-        "verdict": _verdict(cameras, wand_stats),
+        "image_units": units,
+        "verdict": _verdict(cameras, wand_stats, units),
     }
 
 
-def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any]) -> dict[str, Any]:
+def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any], units: str) -> dict[str, Any]:
     """Grade ``good``, ``acceptable`` or ``poor`` with the reasons for anything less."""
     reasons: list[str] = []
     grade = "good"
@@ -150,15 +167,17 @@ def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any]) -> dict[str, A
         rms_max, sd_frac, cover_min = VERDICT_LIMITS[level]
         failed = []
         for cam in cameras:
-            if not cam["reprojection_rms_px"] <= rms_max:
+            limit = rms_max * cam["image_width"] / VERDICT_WIDTH
+            if not cam["reprojection_rms_px"] <= limit:
                 failed.append(
-                    f"{cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3g} px "
-                    f"> {rms_max} px"
+                    f"{cam['name']}: reprojection RMS {cam['reprojection_rms_px']:.3g} {units} "
+                    f"> {limit:.3g} {units}"
                 )
             if not cam["image_coverage"] >= cover_min:
                 failed.append(
                     f"{cam['name']}: the wand covered {100 * cam['image_coverage']:.0f} % of "
-                    f"the image (< {100 * cover_min:.0f} %); distortion is poorly determined"
+                    f"the image (< {100 * cover_min:.0f} %): wave it nearer the image's "
+                    "edges and corners"
                 )
         if not wand["sd_mm"] <= sd_frac * wand["nominal_mm"]:
             failed.append(
@@ -172,90 +191,54 @@ def _verdict(cameras: list[dict[str, Any]], wand: dict[str, Any]) -> dict[str, A
     return {"grade": grade, "reasons": reasons}
 
 
-def write_report_figure(
-    rig: Rig,
-    wand: FloatArray,
-    wand_residuals: FloatArray,
-    inliers: BoolArray,
-    report: dict[str, Any],
-    path: str | Path,
-) -> Path:
-    """Write the calibration's picture (PNG): coverage and residuals per camera, the rig
-    from above with the wand positions, and the histogram of wand length errors.
+def lens_report(report: dict[str, Any], mode: str, choices: Sequence[Any]) -> None:
+    """Add to ``report["cameras"][c]["distortion"]`` the lens terms fitted, why, what next.
 
     Parameters
     ----------
-    rig, wand, wand_residuals, inliers, report
-        As given to and returned by :func:`quality_report`.
-    path : str or Path
-        Output file (``.png``).
+    report : dict
+        A :func:`quality_report`, changed in place.
+    mode : str
+        ``"auto"``, ``"none"``, ``"radial"``, ``"full"`` or ``"terms"`` (a given list).
+    choices : sequence of LensChoice
+        Per camera (``calibration._lens_terms``): ``terms``, ``edge_sd`` (units of the
+        image noise), ``reason``, ``limited_by``.
 
-    Returns
-    -------
-    Path
-        The file written.
+    Notes
+    -----
+    Each camera gets ``fitted`` (list of term names), ``mode``, ``edge_sd_noise`` and
+    ``edge_sd_px`` (largest SD of the modelled distortion over the image, in noise
+    units and in px at the camera's reprojection RMS), ``limited_by``, ``reason`` and
+    ``advice``; ``report["distortion_mode"]`` is ``mode``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
-
-    C = len(rig)
-    cols = min(C, 4)
-    rows = -(-C // cols) + 1
-    fig = Figure(figsize=(3.2 * cols, 2.7 * rows), layout="constrained")
-    norm_res = np.linalg.norm(wand_residuals, axis=-1)
-    vmax = float(np.nanpercentile(norm_res[inliers], 99)) if np.any(inliers) else 1.0
-    for c, cam in enumerate(rig):
-        ax = fig.add_subplot(rows, cols, c + 1)
-        uv = wand[:, c][inliers[:, c]]
-        sc = ax.scatter(
-            uv[:, 0],
-            uv[:, 1],
-            c=norm_res[:, c][inliers[:, c]],
-            s=1,
-            vmin=0,
-            vmax=vmax,
-            cmap="viridis",
-            rasterized=True,
-        )
-        bad = wand[:, c][~inliers[:, c] & np.all(np.isfinite(wand[:, c]), axis=-1)]
-        if len(bad):
-            ax.scatter(bad[:, 0], bad[:, 1], s=6, c="red", marker="x", label="rejected")
-        w, h = cam.size
-        ax.set_xlim(0, w)
-        ax.set_ylim(h, 0)
-        ax.set_aspect("equal")
-        stats = report["cameras"][c]
-        ax.set_title(
-            f"{cam.name}: {stats['reprojection_rms_px']:.3f} px, "
-            f"{100 * stats['image_coverage']:.0f} % covered",
-            fontsize=8,
-        )
-        ax.tick_params(labelsize=6)
-    fig.colorbar(sc, ax=fig.axes, shrink=0.6, label="residual (px)")
-    ax = fig.add_subplot(rows, 2, 2 * rows - 1)
-    centres = np.array([cam.center for cam in rig])
-    F = wand.shape[0]
-    X, _ = intersect(
-        list(rig),
-        np.where(inliers[..., None], wand, np.nan).transpose(1, 0, 2, 3).reshape(C, F * 2, 2),
-    )
-    ax.scatter(X[:, 0], X[:, 1], s=0.5, c="0.6", rasterized=True)
-    ax.scatter(centres[:, 0], centres[:, 1], marker="^", c="C3")
-    for cam, pos in zip(rig, centres, strict=True):
-        ax.annotate(cam.name, pos[:2], fontsize=7)
-    ax.set_aspect("equal")
-    ax.set_title("rig from above (mm)", fontsize=8)
-    ax = fig.add_subplot(rows, 2, 2 * rows)
-    lengths = wand_lengths(rig, wand, inliers)
-    nominal = report["wand"]["nominal_mm"]
-    ax.hist(lengths[np.isfinite(lengths)] - nominal, bins=50, color="C0")
-    ax.set_title(
-        f"wand length error (mm): SD {report['wand']['sd_mm']:.3f}, "
-        f"verdict {report['verdict']['grade']}",
-        fontsize=8,
-    )
-    out = Path(path)
-    fig.savefig(out, dpi=110)
-    return out
+    report["distortion_mode"] = mode
+    for cam, ch in zip(report["cameras"], choices, strict=True):
+        sd = float(ch.edge_sd)
+        advice = ""
+        if ch.limited_by == "coverage":
+            advice = (
+                "wave the wand nearer this camera's image edges and corners to fit more "
+                "terms, or force them with --distortion radial|full"
+            )
+        elif ch.limited_by == "conditioning":
+            advice = (
+                "the data do not show the other terms (they may be negligible for this "
+                "lens); if the lens needs them, wave the wand longer near this camera's "
+                "image edges, or force them with --distortion radial|full"
+            )
+        elif ch.limited_by == "inversion":
+            advice = "cover more of the image so that the lens model holds to its edges"
+        elif ch.limited_by == "chosen" and not sd <= 1.0:
+            advice = (
+                f"the terms asked for are poorly determined here (distortion at the image "
+                f"edge uncertain by {sd:.3g} x the noise): use --distortion auto"
+            )
+        cam["distortion"] = {
+            "fitted": list(ch.terms),
+            "mode": mode,
+            "edge_sd_noise": sd if np.isfinite(sd) else None,
+            "edge_sd_px": sd * cam["reprojection_rms_px"] if np.isfinite(sd) else None,
+            "limited_by": ch.limited_by,
+            "reason": ch.reason or "every term fitted",
+            "advice": advice,
+        }

@@ -18,13 +18,28 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.calibration._camera_block import BLOCK, INTRINSIC_NAMES, cameras_from_blocks
+from spotlab.calibration._camera_block import BLOCK, cameras_from_blocks
+from spotlab.calibration._lens_terms import (
+    choose_terms,
+    fit_fixed_terms,
+    lens_mode,
+    next_step,
+    term_columns,
+)
 from spotlab.calibration._rays import intersect
-from spotlab.calibration._wand_bundle import BundleProblem, BundleState, adjust, residuals
+from spotlab.calibration._wand_bundle import (
+    BundleProblem,
+    BundleState,
+    adjust,
+    residuals,
+    robust_cost,
+    robust_sigma,
+)
 from spotlab.calibration._wand_init import cold_start
-from spotlab.calibration.report import quality_report
+from spotlab.calibration.report import image_coverage, lens_report, quality_report
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Camera, Rig
+from spotlab.geometry.lens_check import lens_problems
 
 __all__ = ["WandCalibration", "wand_calibrate"]
 
@@ -33,7 +48,7 @@ BoolArray = NDArray[np.bool_]
 Progress = Callable[[str], None]
 
 #: Frames used by the first, coarse adjustment stages.
-_COARSE_FRAMES = 400
+_COARSE_FRAMES = 1000
 
 
 @dataclass(frozen=True)
@@ -127,11 +142,7 @@ def _check(
     return wand, length, frame, frame_points
 
 
-def _sigma(r: FloatArray) -> float:
-    """Robust scale (px) of 2-D residuals: the median norm of a circular normal is 1.1774 sigma."""
-    norm = np.linalg.norm(r, axis=-1)
-    norm = norm[np.isfinite(norm)]
-    return float(np.median(norm) / 1.1774) if norm.size else np.nan
+_sigma = robust_sigma
 
 
 def _retriangulate(
@@ -166,9 +177,16 @@ def _frame_weight(wand_res: FloatArray, frame_res: FloatArray) -> float:
 
 
 def _free_mask(
-    C: int, stage: str, distortion: Sequence[str], principal_point: bool, fixed: int | None
+    C: int,
+    stage: str,
+    terms: Sequence[Sequence[str]],
+    principal_point: bool,
+    fixed: int | None,
 ) -> BoolArray:
-    """Adjusted parameters per camera; ``fixed`` camera keeps its pose (gauge)."""
+    """Adjusted parameters per camera; ``fixed`` camera keeps its pose (gauge).
+
+    ``terms[c]`` are the distortion terms adjusted for camera ``c`` in the full stage.
+    """
     free = np.zeros((C, BLOCK), dtype=bool)
     free[:, 0:8] = True  # rotation, translation, fx, fy
     if fixed is not None:
@@ -176,9 +194,41 @@ def _free_mask(
     if stage == "full":
         if principal_point:
             free[:, 8:10] = True
-        for name in distortion:
-            free[:, 6 + INTRINSIC_NAMES.index(name)] = True
+        for c in range(C):
+            free[c, term_columns(terms[c])] = True
     return free
+
+
+def _final_stages(
+    wand: FloatArray,
+    length: float,
+    frame: FloatArray,
+    frame_points: FloatArray,
+    state: BundleState,
+    free: BoolArray,
+    sizes: list[tuple[int, int]],
+    names: list[str],
+    outlier_sigma: float,
+    say: Progress,
+) -> tuple[BundleState, BundleProblem, NDArray[np.intp], list[dict[str, Any]]]:
+    """Re-triangulate every frame with the current rig, adjust, reject outliers, adjust."""
+    cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
+    centres, directions, ok = _retriangulate(cameras, wand)
+    frames = np.flatnonzero(ok)
+    state = BundleState(state.blocks, state.rotations, centres[frames], directions[frames])
+    problem = BundleProblem(wand[frames], length, frame, frame_points, free)
+    stages: list[dict[str, Any]] = []
+    for stage in ("all frames", "outliers rejected"):
+        r, fr = residuals(problem, state)
+        sigma = _sigma(r)
+        if stage == "outliers rejected":
+            problem.use &= ~(np.linalg.norm(r, axis=-1) > outlier_sigma * sigma)
+            problem.frame_weight = _frame_weight(r[problem.use], fr)
+        problem.huber_px = max(3.0 * sigma, 1e-3)
+        say(f"adjusting {frames.size} frames: {stage}")
+        state, log = adjust(problem, state, max_iterations=50)
+        stages.append({"stage": stage, "frames": int(frames.size), **vars(log)})
+    return state, problem, frames, stages
 
 
 def wand_calibrate(
@@ -189,9 +239,10 @@ def wand_calibrate(
     image_size: Any,
     *,
     names: Sequence[str] | None = None,
-    distortion: Sequence[str] = ("k1", "k2", "p1", "p2", "k3"),
+    distortion: str | Sequence[str] = "auto",
     principal_point: bool = True,
     outlier_sigma: float = 5.0,
+    units: str = "px",
     progress: Progress | None = None,
 ) -> WandCalibration:
     """Calibrate a rig from a wand dance and a static reference object, no guess needed.
@@ -213,14 +264,21 @@ def wand_calibrate(
         Image size (px) of all cameras or of each.
     names : sequence of str, optional
         Camera names (default ``cam1`` ... ``camC``).
-    distortion : sequence of str
-        Distortion terms estimated, a subset of ``("k1", "k2", "p1", "p2", "k3")``;
-        the others stay zero.
+    distortion : str or sequence of str
+        Lens terms estimated. ``"auto"`` (default): per camera the richest of
+        ``(), (k1,), (k1, k2), (k1, k2, p1, p2), (k1, k2, p1, p2, k3)`` that the
+        wand's image coverage and the normal matrix determine (``_lens_terms``), one
+        step less for a camera whose fitted model would not invert over its whole image.
+        ``"none"``, ``"radial"`` (k1, k2), ``"full"`` (all five) or a subset of
+        ``("k1", "k2", "p1", "p2", "k3")``: those terms for every camera. The others
+        stay zero. ``report["cameras"][c]["distortion"]`` says what was fitted and why.
     principal_point : bool
         Estimate the principal point (otherwise it stays at the image centre).
     outlier_sigma : float
         Observations whose residual exceeds this many robust standard deviations are
         rejected before the final adjustment.
+    units : str
+        Name of the image unit, for the report (``"px"``; ``"counts"`` for a PSD).
     progress : callable, optional
         Called with a short message at each stage.
 
@@ -234,7 +292,9 @@ def wand_calibrate(
     CalibrationError
         Naming the cause: bad shapes, NaN in the reference coordinates, a camera that
         never sees the wand, too few frames seen by two cameras, cameras that share one
-        position, a reference object not seen by two cameras, no convergence.
+        position, a reference object not seen by two cameras, no convergence, or (for a
+        fixed set of terms) a fitted lens model that does not invert over its image
+        (``spotlab.geometry.lens_check``).
     """
     t0 = time.perf_counter()
     say = progress or (lambda _msg: None)
@@ -244,9 +304,7 @@ def wand_calibrate(
     names = list(names) if names is not None else [f"cam{c + 1}" for c in range(C)]
     if len(names) != C:
         raise CalibrationError(f"{len(names)} names given for {C} cameras")
-    unknown = set(distortion) - set(INTRINSIC_NAMES[4:])
-    if unknown:
-        raise CalibrationError(f"unknown distortion term(s) {sorted(unknown)}")
+    mode, fixed_terms = lens_mode(distortion)
 
     say("cold start: principal distances, relative orientations, world frame")
     init = cold_start(wand, length, frame, frame_points, sizes)
@@ -267,31 +325,80 @@ def wand_calibrate(
     state = BundleState(
         blocks, init.rotations.copy(), init.centres[coarse], init.directions[coarse]
     )
+    coverage = [image_coverage(wand[:, c].reshape(-1, 2), sizes[c]) for c in range(C)]
+    base = _free_mask(C, "full", [()] * C, principal_point, gauge)
     stages: list[dict[str, Any]] = []
-    for stage in ("pose+focal", "full"):
-        say(f"adjusting {coarse.size} frames: {stage}")
-        free = _free_mask(C, stage, distortion, principal_point, gauge)
-        problem = BundleProblem(wand[coarse], length, frame, frame_points, free)
-        problem.huber_px = max(3.0 * _sigma(residuals(problem, state)[0]), 0.1)
-        state, log = adjust(problem, state, max_iterations=40)
-        stages.append({"stage": stage, "frames": int(coarse.size), **vars(log)})
+    say(f"adjusting {coarse.size} frames: pose+focal")
+    problem = BundleProblem(
+        wand[coarse], length, frame, frame_points, _free_mask(C, "", [], False, gauge)
+    )
+    problem.huber_px = max(3.0 * _sigma(residuals(problem, state)[0]), 0.1)
+    state, log = adjust(problem, state, max_iterations=40)
+    stages.append({"stage": "pose+focal", "frames": int(coarse.size), **vars(log)})
+    say(f"adjusting {coarse.size} frames: full, lens terms ({mode})")
+    problem.huber_px = max(3.0 * _sigma(residuals(problem, state)[0]), 0.1)
+    cost = robust_cost(problem, state)
+    if mode == "auto":
+        choices, state = choose_terms(problem, state, base, sizes, coverage)
+    else:
+        choices, state = fit_fixed_terms(mode, fixed_terms, problem, state, base, sizes)
+    terms = [ch.terms for ch in choices]
+    stages.append(
+        {
+            "stage": "full",
+            "frames": int(coarse.size),
+            "initial_cost": cost,
+            "final_cost": robust_cost(problem, state),
+        }
+    )
+    coarse_problem = problem
+    fitted = [f"{n} {', '.join(t) or 'none'}" for n, t in zip(names, terms, strict=True)]
+    say("lens terms: " + "; ".join(fitted))
 
-    cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
-    centres, directions, ok = _retriangulate(cameras, wand)
-    frames = np.flatnonzero(ok)
-    state = BundleState(state.blocks, state.rotations, centres[frames], directions[frames])
-    free = _free_mask(C, "full", distortion, principal_point, gauge)
-    problem = BundleProblem(wand[frames], length, frame, frame_points, free)
-    for stage in ("all frames", "outliers rejected"):
-        r, fr = residuals(problem, state)
-        sigma = _sigma(r)
-        if stage == "outliers rejected":
-            problem.use &= ~(np.linalg.norm(r, axis=-1) > outlier_sigma * sigma)
-            problem.frame_weight = _frame_weight(r[problem.use], fr)
-        problem.huber_px = max(3.0 * sigma, 1e-3)
-        say(f"adjusting {frames.size} frames: {stage}")
-        state, log = adjust(problem, state, max_iterations=50)
-        stages.append({"stage": stage, "frames": int(frames.size), **vars(log)})
+    tried: list[set[tuple[str, ...]]] = [set() for _ in range(C)]
+    while True:
+        # The stage-2 lens must invert before every wand point is triangulated through
+        # it; the final one before it is returned.
+        cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
+        problems = [lens_problems(cam) for cam in cameras]
+        if not any(problems):
+            free = _free_mask(C, "full", terms, principal_point, gauge)
+            final, problem, frames, more = _final_stages(
+                wand, length, frame, frame_points, state, free, sizes, names, outlier_sigma, say
+            )
+            stages += more
+            cameras = cameras_from_blocks(final.blocks, final.rotations, sizes, names)
+            problems = [lens_problems(cam) for cam in cameras]
+            if not any(problems):
+                state = final
+                break
+        if mode != "auto":
+            c = next(i for i, p in enumerate(problems) if p)
+            raise CalibrationError(
+                f"{names[c]}: the fitted lens model ({', '.join(terms[c])}) cannot be "
+                f"inverted over the whole image: {problems[c][0]}; "
+                "fit fewer terms (distortion 'auto' or 'none') or cover more of the image"
+            )
+        for c, found in enumerate(problems):
+            if not found:
+                continue
+            tried[c].add(terms[c])
+            step = next_step(choices[c], found, tried[c], coverage[c])
+            if step is None:
+                raise CalibrationError(
+                    f"{names[c]}: no lens model fitted from this wand dance can be inverted "
+                    f"over the whole image ({found[0]}); cover more of the image"
+                )
+            choices[c], terms[c] = step, step.terms
+            keep = term_columns(terms[c])
+            for col in range(10, 15):
+                if col not in keep:
+                    state.blocks[c, col] = 0.0
+            say(f"{names[c]}: lens model does not invert over the image; trying {step.reason}")
+        # Adjust the new terms on the stage-2 frames (projection only: no inversion
+        # needed) before the wand is triangulated through them again.
+        coarse_problem.free = _free_mask(C, "full", terms, principal_point, gauge)
+        state, _ = adjust(coarse_problem, state, max_iterations=40)
     timings["total_s"] = time.perf_counter() - t0
 
     cameras = cameras_from_blocks(state.blocks, state.rotations, sizes, names)
@@ -303,7 +410,8 @@ def wand_calibrate(
     inliers[frames] = problem.use
     ends = np.full((F, 2, 3), np.nan)
     ends[frames] = state.wand_ends(length)
-    report = quality_report(rig, wand, length, wand_res, r_frame, inliers)
+    report = quality_report(rig, wand, length, wand_res, r_frame, inliers, units)
+    lens_report(report, mode, choices)
     report["stages"] = stages
     report["timings"] = timings
     report["cold_start_tree"] = [[p + 1, q + 1] for p, q in init.tree]

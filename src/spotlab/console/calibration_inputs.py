@@ -58,6 +58,7 @@ class WandObservations:
     image_size: FloatArray
     names: list[str] | None = None
     wand_length: float | None = None
+    units: str = "px"
 
 
 def load_npz(path: Path) -> WandObservations:
@@ -190,4 +191,6 @@ def load_recordings(
             f"{frame_recording}: {static.shape[1]} cameras, the wand recording has {wand.shape[1]}"
         )
     frame = _static_mean(static, frame_markers, frame_recording)
-    return WandObservations(wand, frame, points, np.asarray(PSD_IMAGE_SIZE, dtype=np.float64))
+    return WandObservations(
+        wand, frame, points, np.asarray(PSD_IMAGE_SIZE, dtype=np.float64), units="counts"
+    )

@@ -33,7 +33,7 @@ COMMANDS: dict[str, str] = {
     "replay": "decode a recording again and put every stream on session time",
     "calibrate": "calibrate a camera rig from a wand dance and a reference object",
     "reconstruct": "triangulate marker trajectories from observations and a calibration",
-    "model": "learn, show or check a marker model for identification",
+    "model": "learn, show, check or init a marker model for identification",
     "export": "write a recording or a trial file as C3D or TRC",
     "demo": "simulated system end to end: record with faults, decode, report",
     "udev": "install or check the udev rules for USB-serial adapters and OAK cameras",

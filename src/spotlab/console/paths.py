@@ -43,8 +43,10 @@ def check_output_paths(outputs: Iterable[tuple[str, Path | None]]) -> None:
     ------
     CommandError
         Naming the option and the path: the path is a folder, its folder does not
-        exist, a part of it is a regular file, or the folder is not writable.
+        exist, a part of it is a regular file, the folder or the file is not writable,
+        or two outputs are one file.
     """
+    seen: dict[Path, str] = {}
     for option, path in outputs:
         if path is None:
             continue
@@ -53,6 +55,12 @@ def check_output_paths(outputs: Iterable[tuple[str, Path | None]]) -> None:
         problem = _folder_problem(path.parent)
         if problem is not None:
             raise CommandError(f"{option} {path}: {problem}")
+        if path.exists() and not os.access(path, os.W_OK):
+            raise CommandError(f"{option} {path}: the file is not writable")
+        key = path.resolve()
+        if key in seen:
+            raise CommandError(f"{option} {path}: the same file as {seen[key]}")
+        seen[key] = option
 
 
 def check_output_dir(option: str, folder: Path) -> None:

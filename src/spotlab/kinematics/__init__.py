@@ -20,6 +20,7 @@ from spotlab.kinematics.error_estimates import (
 )
 from spotlab.kinematics.errors import KinematicsError
 from spotlab.kinematics.spline import SmoothingSpline
+from spotlab.kinematics.trial_smoothing import smooth_trial
 
 __all__ = [
     "KinematicsError",
@@ -39,4 +40,5 @@ __all__ = [
     "segment_angles_from_joints",
     "segment_matrix",
     "sigma2_tau",
+    "smooth_trial",
 ]

@@ -92,6 +92,10 @@ def _bspline_values(knots: FloatArray, t: FloatArray, degree: int) -> list[Float
     return values
 
 
+#: Sample intervals per chunk of :func:`bspline_gram_band`'s quadrature.
+GRAM_CHUNK = 1 << 16
+
+
 def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     """Gram matrix ``R_jk = integral N_j N_k`` of the order-m B-splines on knots x.
 
@@ -113,58 +117,61 @@ def bspline_gram_band(x: FloatArray, m: int) -> FloatArray:
     degree = m - 1
     nodes, weights = np.polynomial.legendre.leggauss(m)
     h = np.diff(x)
-    # points of interval i, shape (N - 1, m)
-    points = 0.5 * (x[1:] + x[:-1])[:, None] + 0.5 * h[:, None] * nodes[None, :]
-    qw = 0.5 * h[:, None] * weights[None, :]
     # m - 1 extra knots each side put every sample interval inside the base interval
     pad = np.arange(1, m)
     knots = np.concatenate([x[0] - pad[::-1] * h[0], x, x[-1] + pad * h[-1]])
-    values = _bspline_values(knots, points, degree)
+    # integral of each pair (a, b) of live B-splines over interval i, shape (N - 1,),
+    # computed a chunk of intervals at a time to bound the temporaries
+    pairs = {(a, b): np.empty(n - 1) for a in range(m) for b in range(a, m)}
+    for start in range(0, n - 1, GRAM_CHUNK):
+        stop = min(start + GRAM_CHUNK, n - 1)
+        mid, half = 0.5 * (x[start + 1 : stop + 1] + x[start:stop]), 0.5 * h[start:stop]
+        points = mid[:, None] + half[:, None] * nodes[None, :]  # points of interval i
+        qw = half[:, None] * weights[None, :]
+        values = _bspline_values(knots[start:], points, degree)
+        for (a, b), out in pairs.items():
+            out[start:stop] = (qw * values[a] * values[b]).sum(axis=1)
     # unit-integral scaling: N_j = m / (x_{j+m} - x_j) B_j
     scale = m / (x[m:] - x[:rows])
     ab = np.zeros((m + 1, rows))
-    for a in range(m):
-        for b in range(a, m):
-            per_interval = (qw * values[a] * values[b]).sum(axis=1)  # (N - 1,)
-            d = b - a
-            # interval i couples N_{i-m+1+a} and N_{i-m+1+b}: row j = i - m + 1 + a
-            lo = m - 1 - a  # interval of row 0
-            count = rows - d
-            ab[m - d, d:] += per_interval[lo : lo + count]
+    for (a, b), per_interval in pairs.items():
+        d = b - a
+        # interval i couples N_{i-m+1+a} and N_{i-m+1+b}: row j = i - m + 1 + a
+        lo = m - 1 - a  # interval of row 0
+        count = rows - d
+        ab[m - d, d:] += per_interval[lo : lo + count]
     for d in range(m + 1):
         ab[m - d, d:] *= scale[: rows - d] * scale[d:]
     return ab
 
 
 def _companion_step(
-    window: list[list[FloatArray]], c: list[FloatArray], source: FloatArray
-) -> tuple[list[list[FloatArray]], FloatArray, list[FloatArray]]:
-    """``T X T^T + source e1 e1^T`` for symmetric windows held as nested lists.
+    window: FloatArray, c: FloatArray, source: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``T X T^T + source e1 e1^T`` for stacks of symmetric windows X (bw, bw, ...).
 
     ``T = [[-c^T], [I, 0]]`` is the companion matrix of one row of the Cholesky
-    factor. Returns the new window, its corner (a diagonal entry of the inverse)
-    and ``y = X c`` (minus the rest of that row of the inverse).
+    factor; ``c`` is (bw, ...). Returns the new window, its corner (a diagonal
+    entry of the inverse) and ``y = X c`` (minus the rest of that row of the inverse),
+    shape (bw, ...).
     """
-    bw = len(c)
-    y = []
-    for a in range(bw):
-        acc = window[a][0] * c[0]
-        for col in range(1, bw):
-            acc = acc + window[a][col] * c[col]
-        y.append(acc)
-    corner = source + c[0] * y[0]
+    bw = c.shape[0]
+    y = np.add.reduce(window * c[None], axis=1)
+    terms = c * y
+    corner = source + terms[0]
     for a in range(1, bw):
-        corner = corner + c[a] * y[a]
-    new: list[list[FloatArray]] = [[corner] * bw for _ in range(bw)]
-    for k in range(1, bw):
-        new[0][k] = new[k][0] = -y[k - 1]
-        for col in range(1, bw):
-            new[k][col] = window[k - 1][col - 1]
+        corner += terms[a]
+    new = np.empty_like(window)
+    new[1:, 1:] = window[:-1, :-1]
+    rest = -y[:-1]
+    new[0, 1:] = rest
+    new[1:, 0] = rest
+    new[0, 0] = corner
     return new, corner, y
 
 
 class _BlockLayout:
-    """Samples ``i = b * length + j`` laid out as (length, blocks) arrays, blocks contiguous."""
+    """Samples ``i = b * length + j`` as (length, ..., blocks) arrays, blocks contiguous."""
 
     def __init__(self, n: int) -> None:
         self.n = n
@@ -173,25 +180,27 @@ class _BlockLayout:
         self.total = self.blocks * self.length
 
     def arrange(self, values: FloatArray, out: FloatArray) -> FloatArray:
-        """``values`` (n,) into ``out`` (length, blocks), zero past the end."""
-        by_block = out.T  # (blocks, length), a view
-        full, rest = divmod(values.size, self.length)
-        by_block[:full] = values[: full * self.length].reshape(full, self.length)
-        if full < self.blocks:
-            by_block[full, :rest] = values[full * self.length :]
-            by_block[full, rest:] = 0.0
-            by_block[full + 1 :] = 0.0
+        """``values`` (..., n) into ``out`` (length, ..., blocks), zero past the end."""
+        padded = np.zeros((*values.shape[:-1], self.total))
+        padded[..., : values.shape[-1]] = values
+        return self.arrange_padded(padded, out)
+
+    def arrange_padded(self, padded: FloatArray, out: FloatArray) -> FloatArray:
+        """``padded`` (..., total), zero past n, into ``out`` (length, ..., blocks)."""
+        by_block = padded.reshape(*padded.shape[:-1], self.blocks, self.length)
+        out[...] = np.moveaxis(by_block, -1, 0)
         return out
 
 
 def _takahashi(
     chol: FloatArray, layout: _BlockLayout, coupling: FloatArray, source: FloatArray
-) -> Iterator[tuple[int, FloatArray, list[FloatArray]]]:
-    """Steps of Takahashi's recursion for all blocks at once, last sample first.
+) -> Iterator[tuple[int, FloatArray, FloatArray]]:
+    """Steps of Takahashi's recursion for all blocks (and factors) at once, last sample first.
 
-    Yields ``(j, corner, y)`` per step j of every block: ``corner`` (blocks,) is
+    ``chol`` is one upper banded factor (bw + 1, n) or a stack (C, bw + 1, n).
+    Yields ``(j, corner, y)`` per step j of every block: ``corner`` (C, blocks) is
     ``inv(A)[i, i]`` and ``-y[k - 1]`` is ``inv(A)[i, i + k]`` for ``i = b * length + j``.
-    ``coupling`` (bw, length, blocks) and ``source`` (length, blocks) are work arrays.
+    ``coupling`` (bw, length, C, blocks) and ``source`` (length, C, blocks) are work arrays.
 
     Notes
     -----
@@ -201,45 +210,47 @@ def _takahashi(
     companion matrix of row i of U, O(n bw^2) in all. The maps compose, so
     the n steps run as blocks side by side: compose each block's map, chain
     the block maps, then run all blocks from their known ends together. The
-    windows are held entry by entry (arrays over blocks), so each step is a
-    few dozen vector operations.
+    windows are held entry by entry (arrays over factors and blocks), so each
+    step is a few dozen vector operations whatever the number of factors.
     """
-    bw = chol.shape[0] - 1
-    n = chol.shape[1]
+    stack = chol if chol.ndim == 3 else chol[None]
+    count, bands, n = stack.shape
+    bw = bands - 1
     blocks, length = layout.blocks, layout.length
-    diag = chol[bw]
+    diag = stack[:, bw]
     # past the end: no coupling and no source, so the window stays zero
+    row = np.zeros((count, layout.total))
     for d in range(1, bw + 1):
-        row = np.zeros(n)
-        np.divide(chol[bw - d, d:], diag[: n - d], out=row[: n - d])
-        layout.arrange(row, coupling[d - 1])
-    layout.arrange(1.0 / diag**2, source)
-    zero = np.zeros(blocks)
-    # 1. each block's map X -> phi X phi^T + psi
-    phi = [[np.full(blocks, float(a == b)) for b in range(bw)] for a in range(bw)]
-    psi = [[zero] * bw for _ in range(bw)]
+        np.divide(stack[:, bw - d, d:], diag[:, : n - d], out=row[:, : n - d])
+        row[:, n - d :] = 0.0
+        layout.arrange_padded(row, coupling[d - 1])
+    np.square(diag, out=row[:, :n])
+    np.divide(1.0, row[:, :n], out=row[:, :n])
+    layout.arrange_padded(row, source)
+    # 1. each block's map X -> phi X phi^T + psi, as stacks (bw, bw, C, blocks)
+    phi = np.zeros((bw, bw, count, blocks))
+    for a in range(bw):
+        phi[a, a] = 1.0
+    psi = np.zeros((bw, bw, count, blocks))
     for j in range(length - 1, -1, -1):
-        c = [coupling[k, j] for k in range(bw)]
-        top = []
-        for col in range(bw):
-            acc = phi[0][col] * c[0]
-            for k in range(1, bw):
-                acc = acc + phi[k][col] * c[k]
-            top.append(-acc)
-        phi = [top, *phi[:-1]]
+        c = coupling[:, j]
+        top = np.negative(np.add.reduce(phi * c[:, None], axis=0))
+        phi = np.concatenate([top[None], phi[:-1]])
         psi, _, _ = _companion_step(psi, c, source[j])
-    phi_b: FloatArray = np.moveaxis(np.array(phi), 2, 0)
-    psi_b: FloatArray = np.moveaxis(np.array(psi), 2, 0)
+    # (C, blocks, bw, bw)
+    phi_b: FloatArray = np.moveaxis(phi, (2, 3), (0, 1))
+    psi_b: FloatArray = np.moveaxis(psi, (2, 3), (0, 1))
     # 2. the window at the end of each block
-    ends = np.zeros((blocks, bw, bw))
-    x = np.zeros((bw, bw))
+    ends = np.zeros((count, blocks, bw, bw))
+    x = np.zeros((count, bw, bw))
+    phi_t = np.swapaxes(phi_b, 2, 3)
     for b in range(blocks - 1, -1, -1):
-        ends[b] = x
-        x = phi_b[b] @ x @ phi_b[b].T + psi_b[b]
+        ends[:, b] = x
+        x = phi_b[:, b] @ x @ phi_t[:, b] + psi_b[:, b]
     # 3. all blocks from their ends at once
-    window = [[np.ascontiguousarray(ends[:, a, b]) for b in range(bw)] for a in range(bw)]
+    window = np.ascontiguousarray(np.moveaxis(ends, (2, 3), (0, 1)))
     for j in range(length - 1, -1, -1):
-        window, corner, y = _companion_step(window, [coupling[k, j] for k in range(bw)], source[j])
+        window, corner, y = _companion_step(window, coupling[:, j], source[j])
         yield j, corner, y
 
 
@@ -255,8 +266,11 @@ class InverseTrace:
     -----
     Only the band of ``inv(A)`` enters the trace, and its entries are summed as
     Takahashi's recursion (:func:`_takahashi`) produces them, block-major, so no
-    band of the inverse is ever stored. The work arrays are kept between calls:
-    a smoothing-parameter search evaluates the trace many times at one size.
+    band of the inverse is ever stored. Several factors of the same size (one
+    matrix at several smoothing parameters) run side by side in one recursion,
+    so its per-step cost in Python is paid once for all of them. The work arrays
+    are kept between calls: a smoothing-parameter search evaluates the trace
+    many times at one size.
     """
 
     def __init__(self, r: FloatArray) -> None:
@@ -270,15 +284,27 @@ class InverseTrace:
             row = np.zeros(n)
             row[: n - d] = r[bw - d, d:] * (1.0 if d == 0 else 2.0)
             self.layout.arrange(row, self.r[d])
-        self.coupling = np.empty((bw, *shape))
-        self.source = np.empty(shape)
+        self._bw = bw
+        self._work: dict[int, tuple[FloatArray, FloatArray]] = {}
+
+    def _arrays(self, count: int) -> tuple[FloatArray, FloatArray]:
+        if count not in self._work:
+            shape = (self.layout.length, count, self.layout.blocks)
+            self._work = {count: (np.empty((self._bw, *shape)), np.empty(shape))}
+        return self._work[count]
 
     def __call__(self, chol: FloatArray) -> float:
         """The trace, for the upper banded Cholesky factor ``chol`` (bw + 1, n) of A."""
-        bw = chol.shape[0] - 1
-        acc = np.zeros(self.layout.blocks)
-        for j, corner, y in _takahashi(chol, self.layout, self.coupling, self.source):
+        return float(self.many(chol[None])[0])
+
+    def many(self, chol: FloatArray) -> FloatArray:
+        """The traces, shape (C,), for a stack of upper banded factors ``chol`` (C, bw + 1, n)."""
+        coupling, source = self._arrays(chol.shape[0])
+        acc = np.zeros((chol.shape[0], self.layout.blocks))
+        for j, corner, y in _takahashi(chol, self.layout, coupling, source):
             acc += corner * self.r[0, j]
-            for k in range(1, bw + 1):
-                acc -= y[k - 1] * self.r[k, j]
-        return float(acc.sum())
+            # term by term, in this order: GCV's minimum is flat, so the searched p follows
+            # the trace's last bits (the batched and one-channel searches must agree)
+            for term in y * self.r[1:, j, None]:
+                acc -= term
+        return np.asarray(acc.sum(axis=1), dtype=np.float64)

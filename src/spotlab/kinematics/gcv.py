@@ -109,6 +109,10 @@ class PenalisedSpline:
             raise linalg.LinAlgError(f"{info}-th leading minor not positive definite")
         return np.asarray(chol)
 
+    def traces(self, chol: FloatArray) -> FloatArray:
+        """``tr(inv(A) R)`` (C,) for factors (C, m + 1, N - m) of this matrix at C values of p."""
+        return self._trace.many(chol)
+
     def solve(
         self, p: float, y: FloatArray, rhs: FloatArray | None = None
     ) -> tuple[FloatArray, FloatArray]:

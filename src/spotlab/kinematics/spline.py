@@ -9,7 +9,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline, make_interp_spline
 
 from spotlab.kinematics.errors import KinematicsError
-from spotlab.kinematics.gcv import PenalisedSpline, gcv_fit, solve_wood_jennings
+from spotlab.kinematics.gcv import FitStatistics, PenalisedSpline, solve_wood_jennings
+from spotlab.kinematics.gcv_batch import gcv_fit_many
 
 FloatArray = NDArray[np.float64]
 
@@ -90,6 +91,9 @@ class SmoothingSpline:
     & Jennings (1979, J Biomech 12:477-479) as used by Yeadon
     (1990). Outside ``[t_1, t_N]`` the spline is its natural extension, a
     polynomial of degree m - 1.
+    Channels of ``y`` (N, K) missing the same samples share one banded matrix,
+    and their GCV searches run batched (:mod:`spotlab.kinematics.gcv_batch`):
+    the results are those of K one-channel calls.
 
     Examples
     --------
@@ -149,46 +153,84 @@ class SmoothingSpline:
         self.degree = degree
         self._m = m
         self._t0, self._t1 = float(tt[0]), float(tt[-1])
-        fits, stats = [], []
-        shared = None if np.any(missing) else PenalisedSpline(tt, w, m)
-        for j in range(yy.shape[1]):
-            keep = ~missing[:, j]
-            col = yy[keep, j][:, None]
+        k_all = yy.shape[1]
+        ps, gcvs, msrs, dofs, variances = (np.zeros(k_all) for _ in range(5))
+        self._fits: list[tuple[BSpline, NDArray[np.intp]]] = []
+        # channels missing the same samples share their knots, weights and banded matrix
+        groups: dict[bytes, list[int]] = {}
+        for j, key in enumerate(np.packbits(missing, axis=0).T):
+            groups.setdefault(key.tobytes(), []).append(j)
+        for members in groups.values():
+            cols = np.array(members)
+            keep = ~missing[:, members[0]]
             # a missing sample has zero weight, and a zero-weight knot does not change the
             # minimiser: fit the samples present, interpolate the gaps with the same spline
-            problem = shared if shared is not None else PenalisedSpline(tt[keep], w[keep], m)
+            whole = bool(keep.all())  # no copies of long records without gaps
+            x = tt if whole else tt[keep]
+            problem = PenalisedSpline(x, w if whole else w[keep], m)
+            block = yy if whole and len(members) == k_all else yy[keep][:, cols]
             if p is None and sigma is None:
-                pj, fitted, st = gcv_fit(problem, col, x=tt[keep])
+                pg, fitted, stats = gcv_fit_many(problem, block, x=x)
             else:
-                pj = float(p) if p is not None else solve_wood_jennings(problem, col)
-                try:
-                    fitted, st = problem.statistics(pj, col)
-                except np.linalg.LinAlgError as exc:
-                    raise KinematicsError(
-                        f"p = {pj:g} is too large for these {col.shape[0]} samples: the "
-                        "banded system is singular to working precision; use a smaller p"
-                    ) from exc
-            fits.append(BSpline.construct_fast(*self._natural(tt[keep], fitted[:, 0], degree)))
-            stats.append((pj, st))
-        self._fits = fits
-        self.p = self._pack([s[0] for s in stats])
-        self.gcv = self._pack([float(s[1].gcv[0]) for s in stats])
-        self.msr = self._pack([float(s[1].msr[0]) for s in stats])
-        self.dof = self._pack([s[1].dof for s in stats])
-        self.residual_dof = self._pack(
-            [float(counts[j]) - stats[j][1].dof for j in range(len(stats))]
+                pg, fitted, stats = self._fit_given(problem, block, p)
+            ps[cols], fitted_cols = pg, fitted
+            for j, col in enumerate(cols):
+                gcvs[col], msrs[col] = float(stats[j].gcv[0]), float(stats[j].msr[0])
+                dofs[col], variances[col] = stats[j].dof, float(stats[j].variance[0])
+            del problem  # its bands are as large as the data: not kept while interpolating
+            natural = self._natural(x, fitted_cols, degree)
+            self._fits.append((BSpline.construct_fast(*natural), cols))
+        self._k = k_all
+        self.p = self._pack(ps)
+        self.gcv = self._pack(gcvs)
+        self.msr = self._pack(msrs)
+        self.dof = self._pack(dofs)
+        self.residual_dof = self._pack(counts.astype(np.float64) - dofs)
+        self.variance = self._pack(variances)
+
+    @staticmethod
+    def _fit_given(
+        problem: PenalisedSpline, y: FloatArray, p: float | None
+    ) -> tuple[FloatArray, FloatArray, list[FitStatistics]]:
+        """Fits at a fixed p (one factor for all channels) or at Wood & Jennings' p each."""
+        values = (
+            [float(p)]
+            if p is not None
+            else [solve_wood_jennings(problem, y[:, j : j + 1]) for j in range(y.shape[1])]
         )
-        self.variance = self._pack([float(s[1].variance[0]) for s in stats])
+        parts = [y] if p is not None else [y[:, j : j + 1] for j in range(y.shape[1])]
+        fitted: list[FloatArray] = []
+        stats: list[FitStatistics] = []
+        for value, part in zip(values, parts, strict=True):
+            try:
+                fit, st = problem.statistics(value, part)
+            except np.linalg.LinAlgError as exc:
+                raise KinematicsError(
+                    f"p = {value:g} is too large for these {y.shape[0]} samples: the "
+                    "banded system is singular to working precision; use a smaller p"
+                ) from exc
+            fitted.append(fit)
+            stats.extend(
+                FitStatistics(
+                    msr=st.msr[i : i + 1],
+                    dof=st.dof,
+                    gcv=st.gcv[i : i + 1],
+                    variance=st.variance[i : i + 1],
+                )
+                for i in range(part.shape[1])
+            )
+        ps = np.full(y.shape[1], values[0]) if p is not None else np.array(values)
+        return ps, np.concatenate(fitted, axis=1), stats
 
     @staticmethod
     def _natural(x: FloatArray, f: FloatArray, degree: int) -> tuple[FloatArray, FloatArray, int]:
         """Knots, coefficients, degree of the natural spline through (x, f)."""
         m = (degree + 1) // 2
-        ends = [(order, 0.0) for order in range(m, degree)]
+        ends = [(order, np.zeros(f.shape[1:])) for order in range(m, degree)]
         interp = make_interp_spline(x, f, k=degree, bc_type=(ends, ends))
         return interp.t, interp.c, degree
 
-    def _pack(self, values: list[float]) -> float | FloatArray:
+    def _pack(self, values: FloatArray) -> float | FloatArray:
         return float(values[0]) if self._vector else np.array(values, dtype=np.float64)
 
     def __call__(self, t: ArrayLike, nu: int = 0) -> FloatArray:
@@ -210,18 +252,21 @@ class SmoothingSpline:
         tt = np.asarray(t, dtype=np.float64)
         if not np.all(np.isfinite(tt)):
             raise KinematicsError("evaluation times must be finite")
-        cols = [self._evaluate(fit, tt, nu) for fit in self._fits]
-        return cols[0] if self._vector else np.stack(cols, axis=-1)
+        out = np.empty((*tt.shape, self._k))
+        for fit, cols in self._fits:
+            out[..., cols] = self._evaluate(fit, tt, nu)
+        return out[..., 0] if self._vector else out
 
     def _evaluate(self, fit: BSpline, t: FloatArray, nu: int) -> FloatArray:
+        """Values (..., K_group) of one group's vector-valued spline."""
         out = np.asarray(fit(np.clip(t, self._t0, self._t1), nu=nu), dtype=np.float64)
         # outside [t_1, t_N] the natural spline is the Taylor polynomial of degree m - 1
         for edge, side in ((self._t0, t < self._t0), (self._t1, t > self._t1)):
             if np.any(side):
-                dt = t[side] - edge
-                ext = np.zeros(dt.shape)
+                dt = (t[side] - edge)[:, None]
+                ext = np.zeros((dt.shape[0], out.shape[-1]))
                 for order in range(nu, self._m):
-                    deriv = float(fit(edge, nu=order))
-                    ext += deriv * dt ** (order - nu) / math.factorial(order - nu)
+                    deriv = np.asarray(fit(edge, nu=order), dtype=np.float64)
+                    ext += deriv[None, :] * dt ** (order - nu) / math.factorial(order - nu)
                 out[side] = ext
         return out

@@ -43,7 +43,11 @@ def test_noise_free_data_give_the_true_rig_exactly() -> None:
 
 def test_cold_start_reaches_the_noise_floor_in_the_world_frame() -> None:
     d = _scene(seed=3, cameras=8, frames=1500)
-    result = _calibrate(d)
+    # The scene's lenses carry all five terms, k3 and the tangential ones small (k3
+    # -0.003 to -0.016, p up to 5e-4): the automatic choice leaves some out (their
+    # estimates are < 3 standard errors from 1000 frames) and the orientation then
+    # misses by up to 0.055 degrees; the full model, asked for, reaches the floor.
+    result = _calibrate(d, distortion="full")
     floor = _scores(d.rig, d)
     # Shape of the reconstruction: at the floor (benchmarks/wand_calibration.py measures
     # the reference scene of 3000 frames; this smaller one leaves a little more).

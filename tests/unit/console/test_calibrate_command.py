@@ -113,3 +113,73 @@ def test_bad_input_is_one_clear_line(
     assert err[-1].startswith("spotlab: error:")
     assert message in err[-1]
     assert not (tmp_path / "o.toml").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("--figure", "nodir/f.png", "the folder"),
+        ("--report", "plain.txt/r.json", "is a file, not a folder"),
+        ("--report", "o.toml", "the same file as --out"),
+        ("--out", ".", "is a folder"),
+    ],
+)
+def test_output_paths_are_checked_before_the_work(
+    dance: WandDance,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    option: str,
+    value: str,
+    message: str,
+) -> None:
+    obs = tmp_path / "obs.npz"
+    np.savez(
+        obs,
+        wand=dance.wand,
+        frame=dance.frame,
+        frame_points=dance.frame_points,
+        image_size=np.array([1280, 1024]),
+        wand_length=500.0,
+    )
+    (tmp_path / "plain.txt").write_text("a file\n")
+    argv = ["calibrate", str(obs), "--out", str(tmp_path / "o.toml")]
+    if option == "--out":
+        argv = ["calibrate", str(obs)]
+    code = main([*argv, option, str(tmp_path / value)])
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert code != 0
+    assert err == [err[-1]] and err[-1].startswith(f"spotlab: error: {option}")
+    assert message in err[-1]
+    assert "calibrate: cold start" not in captured.err  # refused before the work
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["obs.npz", "plain.txt"]
+
+
+def test_distortion_choices(
+    dance: WandDance, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    obs = tmp_path / "obs.npz"
+    np.savez(
+        obs,
+        wand=dance.wand,
+        frame=dance.frame,
+        frame_points=dance.frame_points,
+        image_size=np.array([1280, 1024]),
+        wand_length=500.0,
+    )
+    out = tmp_path / "rig.toml"
+    for flags, mode, fitted in (
+        (["--distortion", "radial"], "radial", ["k1", "k2"]),
+        (["--no-distortion"], "none", []),
+    ):
+        assert main(["calibrate", str(obs), "--out", str(out), "--json", *flags]) == 0
+        report = json.loads(capsys.readouterr().out)
+        assert report["distortion_mode"] == mode
+        assert [c["distortion"]["fitted"] for c in report["cameras"]] == [fitted] * 3
+    # The default chooses per camera and says so in the text summary.
+    assert main(["calibrate", str(obs), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.count("lens terms") == 3 and "(auto)" in text
+    saved = json.loads(out.with_suffix(".report.json").read_text())
+    assert saved["distortion_mode"] == "auto"
+    assert all("k1" in c["distortion"]["fitted"] for c in saved["cameras"])

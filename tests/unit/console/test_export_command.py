@@ -138,3 +138,22 @@ def test_trc_to_trc_keeps_the_time_column(shared_data: Path, tmp_path: Path) -> 
     assert main(["export", str(source), "--trc", str(out), "--json"]) == 0
     assert read_trc(out).metadata["time_text"] == read_trc(source).metadata["time_text"]
     assert read_trc(out).metadata["time_text"][1] == "0.017000"
+
+
+def test_smooth_writes_each_coordinate_smoothed_and_keeps_gaps(
+    folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from spotlab.kinematics import smooth_trial
+
+    out = tmp_path / "smooth.c3d"
+    source = folder / "trial.c3d"
+    assert main(["export", str(source), "--c3d", str(out), "--smooth", "--json"]) == 0
+    assert "spline" in json.loads(capsys.readouterr().out)["smoothed"]
+    original, written = read_c3d(source), read_c3d(out)
+    assert np.array_equal(np.isnan(written.points), np.isnan(original.points))
+    expected = smooth_trial(original).points
+    assert np.allclose(written.points, expected, atol=1e-3, equal_nan=True)
+    assert not np.allclose(written.points, original.points, atol=1.0, equal_nan=True)
+    trc = tmp_path / "smooth.trc"
+    assert main(["export", str(source), "--trc", str(trc), "--smooth"]) == 0
+    assert "smoothed           quintic GCV spline" in capsys.readouterr().out

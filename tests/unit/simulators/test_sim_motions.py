@@ -35,8 +35,9 @@ def all_markers(motion: object, t: np.ndarray) -> np.ndarray:
 def test_wand_ends_stay_500_mm_apart_inside_the_volume() -> None:
     p = all_markers(WandDance(seed=7), T)
     np.testing.assert_allclose(np.linalg.norm(p[:, 0] - p[:, 1], axis=1), 500.0)
-    assert p[..., 2].min() > 200 and p[..., 2].max() < 1900
-    assert np.abs(p[..., :2]).max() < 1100
+    # An operator's sweep: from near the floor to above the head, across the volume.
+    assert p[..., 2].min() > 100 and p[..., 2].max() < 2000
+    assert np.abs(p[..., :2]).max() < 2000
     speed = np.linalg.norm(np.diff(p[:, 0], axis=0), axis=1) / np.diff(T)[0]
     assert 50 < np.median(speed) < 3000  # mm/s: a person waving a wand
     direction = (p[:, 1] - p[:, 0]) / 500.0

@@ -61,7 +61,7 @@ def test_records_match_truth_sampled_per_slot(
     h.dev.close(h.t)
     rows = list(csv.DictReader(truth.read_text().splitlines()))
     assert len(rows) == len(frames)
-    worst = 0.0
+    worst, compared = 0.0, 0
     for f, row in zip(frames, rows, strict=True):
         assert int(row["seq"]) == f["seq"] and int(row["frame_no"]) == f["frame_no"]
         assert int(row["device_tick"]) == f["tick"] and row["sent"] == "1"
@@ -75,8 +75,13 @@ def test_records_match_truth_sampled_per_slot(
             for c, cam in enumerate(rig):
                 xc = cam.R @ X + cam.t
                 u, v = cam.focal * xc[0] / xc[2] + 2048, cam.focal * xc[1] / xc[2] + 2048
-                if f["flags"][k, c] & wire.FLAG_VALID:  # type: ignore[index]
+                flags = f["flags"][k, c]  # type: ignore[index]
+                # Saturated readings are pulled towards the centre (documented): the
+                # operator's dance passes close to the cameras now and then.
+                if flags & wire.FLAG_VALID and not flags & wire.FLAG_SATURATED:
                     worst = max(worst, abs(f["x"][k, c] - u), abs(f["y"][k, c] - v))  # type: ignore[index]
+                    compared += 1
+    assert compared > 0.5 * 4 * len(frames)
     assert worst <= 0.51
 
 

@@ -41,6 +41,7 @@ from spotlab.console.trajectories import (
     write_trial,
 )
 from spotlab.io import TRIAL_READERS, Trial
+from spotlab.kinematics import smooth_trial
 
 
 def add_parser(sub: Any) -> None:
@@ -105,6 +106,12 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="take every marker at its frame's time, not its LED slot's (diagnosis only: "
         "biases moving markers)",
+    )
+    p.add_argument(
+        "--smooth",
+        action="store_true",
+        help="smooth every marker coordinate with its own quintic GCV spline before writing "
+        "(spotlab.kinematics.smooth_trial; gaps stay gaps)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
@@ -192,6 +199,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         known = ", ".join([*TRIAL_READERS, *OBSERVATION_SUFFIXES])
         raise CommandError(f"{path}: unknown input format {suffix!r} ({known})")
+    if args.smooth:
+        trial = smooth_trial(trial)
+        summary["smoothed"] = "quintic GCV spline per marker coordinate"
     for out in outputs:
         write_trial(out, trial, drop_groups=args.drop_group)
     if args.json:
@@ -203,6 +213,8 @@ def run(args: argparse.Namespace) -> int:
             f"converted {summary['frames']} frames x {summary['markers']} markers at "
             f"{summary['rate_hz']:g} Hz"
         )
+        if "smoothed" in summary:
+            print(f"  smoothed           {summary['smoothed']}")
         for out in outputs:
             print(f"  wrote              {out}")
     return 0

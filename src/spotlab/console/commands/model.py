@@ -6,7 +6,10 @@
   distance spreads (printed);
 * ``spotlab model show MODEL.json``: its markers, segments, links and tolerances;
 * ``spotlab model check MODEL.json TRIAL.c3d|TRIAL.trc [--frames A:B]``: how well the
-  trial fits the model, marker by marker (:func:`model_fit`).
+  trial fits the model, marker by marker (:func:`model_fit`);
+* ``spotlab model init STATIC.spj --template NAME|FILE --calibration RIG.toml --out
+  M0.json`` and ``spotlab model learn ROM.spj --model M0.json --calibration RIG.toml
+  --out MODEL.json``: a new subject's models (:mod:`.model_init`).
 
 Reading is :mod:`spotlab.io.trial_files`, the methods are in
 :mod:`spotlab.reconstruction.identification`; this module parses and prints.
@@ -21,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from spotlab.console.commands.model_init import add_init_parser, run_learn_recording
 from spotlab.console.errors import EXIT_USAGE, CommandError
 from spotlab.console.paths import check_output_paths
 from spotlab.core.errors import ReconstructionError
@@ -31,10 +35,10 @@ from spotlab.reconstruction.identification import MarkerModel, model_fit
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "model",
-        help="learn, show or check a marker model for identification",
+        help="learn, show, check or init a marker model for identification",
         description="Marker models (rigid clusters and distance links) for labelling markers.",
     )
-    actions = p.add_subparsers(dest="action", metavar="ACTION", help="learn, show or check")
+    actions = p.add_subparsers(dest="action", metavar="ACTION", help="learn, show, check or init")
     actions.required = True
 
     learn = actions.add_parser(
@@ -43,8 +47,17 @@ def add_parser(sub: Any) -> None:
         description="Find the rigid clusters and distance links of a labelled trial; the "
         "rigid tolerance is chosen from the trial's distance spreads.",
     )
-    learn.add_argument("trial", type=Path, help="TRIAL.c3d or TRIAL.trc")
+    learn.add_argument(
+        "trial", type=Path,
+        help="TRIAL.c3d or TRIAL.trc (labelled), or ROM.spj (a video-centroid recording of "
+        "a range-of-motion trial, labelled with --model M0.json and --calibration)",
+    )  # fmt: skip
     _markers_and_frames(learn)
+    learn.add_argument(
+        "--model", type=Path, metavar="M0.json",
+        help="with ROM.spj: the subject's first model (spotlab model init)",
+    )  # fmt: skip
+    learn.add_argument("--calibration", type=Path, metavar="RIG.toml", help="with ROM.spj: the rig")
     learn.add_argument("--out", type=Path, required=True, help="MODEL.json to write")
     learn.add_argument(
         "--tolerance",
@@ -59,6 +72,7 @@ def add_parser(sub: Any) -> None:
         help="largest distance spread of a link (default: 5 tolerances, at least 50 mm)",
     )
     learn.set_defaults(run=run_learn)
+    add_init_parser(actions)
 
     show = actions.add_parser("show", help="print a model's markers, segments and links")
     show.add_argument("model", type=Path, help="MODEL.json")
@@ -107,6 +121,15 @@ def parse_frames(text: str | None) -> tuple[int | None, int | None] | None:
 
 
 def run_learn(args: argparse.Namespace) -> int:
+    if args.model is not None or args.trial.suffix.lower() == ".spj":
+        if args.model is None or args.calibration is None:
+            raise CommandError(
+                f"{args.trial}: a recording is learnt from with --model M0.json (spotlab "
+                "model init) and --calibration RIG.toml",
+                EXIT_USAGE,
+            )
+        args.input = args.trial
+        return run_learn_recording(args)
     if args.out.suffix.lower() != ".json":
         raise CommandError(f"--out {args.out}: the model file name must end in .json", EXIT_USAGE)
     check_output_paths([("--out", args.out)])

@@ -14,10 +14,15 @@ from spotlab.console.paths import check_output_dir, check_output_paths
 from spotlab.io import FileFormatError
 from spotlab.simulators import service
 from spotlab.simulators.centroid_model import write_body_model
-from spotlab.simulators.centroid_service import CentroidSimOptions, serve_centroid_pty
+from spotlab.simulators.centroid_service import (
+    CENTROID_MOTIONS,
+    LFRAME_MARKERS,
+    CentroidSimOptions,
+    serve_centroid_pty,
+)
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import lab_dir
-from spotlab.simulators.motions import MOTIONS, from_c3d
+from spotlab.simulators.motions import MOTIONS, from_c3d, make_motion, static_points
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -91,9 +96,12 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "--motion",
-        default="wand",
-        help="wand, cluster, gait, lframe (static L-frame), or a C3D file whose markers "
-        "move the LEDs",
+        default=None,
+        help="selspot: wand (default), cluster, gait, lframe (static L-frame), or a C3D file "
+        "whose markers move the LEDs; centroid: walk (default, the 40-marker body), static "
+        "(the body standing still, swaying a few mm), rom (range of motion: every joint "
+        "moves while the subject turns on the spot), wand (a passive wand of --markers 2 or "
+        "3 waved through the volume) or lframe (a static L-frame on the floor)",
     )
     p.add_argument(
         "--reflectance",
@@ -106,6 +114,15 @@ def add_parser(sub: Any) -> None:
         type=Path,
         metavar="RIG.toml",
         help="write the simulated cameras' true calibration (spotlab rig TOML, detector counts)",
+    )
+    p.add_argument(
+        "--frame-points-out",
+        type=Path,
+        metavar="POINTS.csv",
+        help="write the reference object's published coordinates (mm) as CSV, the "
+        "--frame-points table of spotlab calibrate: selspot: the motion's static markers "
+        "(the L-frame first), columns marker (LED number, 1-based), X, Y, Z; centroid: the "
+        "L-frame's markers, columns X, Y, Z",
     )
     p.add_argument(
         "--ring-phase",
@@ -143,7 +160,16 @@ def add_parser(sub: Any) -> None:
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
     cen = p.add_argument_group("centroid (video cameras, passive markers)")
-    cen.add_argument("--markers", type=int, default=40, help="markers on the walking body (40)")
+    cen.add_argument(
+        "--markers", type=int, default=None,
+        help="markers: on the walking body (default 40), on the wand (2 or 3, default 3), "
+        "of the L-frame (default 4)",
+    )  # fmt: skip
+    cen.add_argument(
+        "--wand-length", type=float, default=500.0, metavar="MM",
+        help="wand: distance between its end markers (default 500 mm); a 3-marker wand's "
+        "middle marker sits 0.4 of it from end A",
+    )  # fmt: skip
     cen.add_argument(
         "--ghosts", type=float, default=0.02, metavar="RATE",
         help="fraction of (camera, marker) pairs that see a floor-reflection ghost (0.02)",
@@ -179,7 +205,7 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         raise CommandError(f"--rate must be positive, got {args.rate}")
     if not 0.0 <= args.reflectance <= 1.0:
         raise CommandError(f"--reflectance must be 0 to 1, got {args.reflectance}")
-    motion = args.motion
+    motion = args.motion or "wand"
     if motion not in MOTIONS and not Path(motion).is_file():
         raise CommandError(f"--motion {motion!r} is neither {', '.join(MOTIONS)} nor a C3D file")
     return service.SelspotSimOptions(
@@ -202,6 +228,22 @@ def options_from_args(args: argparse.Namespace) -> service.SelspotSimOptions:
         lab_name=getattr(args, "lab_name", None) or "selspot",
         lab=getattr(args, "lab", None),
     )
+
+
+def _write_frame_points(path: Path, options: service.SelspotSimOptions) -> None:
+    """The static markers' coordinates of the simulated motion, for ``spotlab calibrate``."""
+    check_output_paths([("--frame-points-out", path)])
+    try:
+        points = static_points(make_motion(options.motion, options.leds, options.seed))
+    except (OSError, ValueError) as exc:
+        raise CommandError(f"--motion {options.motion}: {exc}") from None
+    if not points:
+        raise CommandError(
+            f"--frame-points-out: --motion {options.motion} with --leds {options.leds} has no "
+            "static markers (use --motion lframe, or more LEDs than the motion moves)"
+        )
+    rows = [f"{i + 1},{x:g},{y:g},{z:g}\n" for i, _label, (x, y, z) in points]
+    path.write_text("marker,X,Y,Z\n" + "".join(rows))
 
 
 def clock_steps_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
@@ -270,8 +312,17 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     cameras = 8 if args.cameras is None else args.cameras
     sun = _episodes(args.sunlight, "--sunlight", cameras, default_camera=True)
     off = _episodes(args.camera_off, "--camera-off", cameras, default_camera=False)
+    motion = args.motion or "walk"
+    if motion not in CENTROID_MOTIONS:
+        raise CommandError(
+            f"--motion {motion!r}: the centroid simulator plays {', '.join(CENTROID_MOTIONS)}"
+        )
+    markers = args.markers
+    if markers is None:
+        markers = {"wand": 3, "lframe": LFRAME_MARKERS}.get(motion, 40)
     options = CentroidSimOptions(
-        cameras=cameras, markers=args.markers,
+        cameras=cameras, markers=markers, motion=motion,
+        wand_length_mm=args.wand_length, frame_points_out=args.frame_points_out,
         rate_hz=args.rate, seed=args.seed, truth=args.truth, fault_log=args.fault_log,
         rig_out=args.rig_out, faults=args.faults, clock_offset_s=args.clock_offset,
         clock_drift_ppm=args.clock_drift_ppm, clock_jitter_s=args.clock_jitter,
@@ -295,6 +346,7 @@ def check_args(args: argparse.Namespace) -> None:
             ("--fault-log", args.fault_log),
             ("--rig-out", args.rig_out),
             ("--model-out", getattr(args, "model_out", None)),
+            ("--frame-points-out", getattr(args, "frame_points_out", None)),
         ]
     )
     check_output_dir("--lab" if args.lab is not None else "lab folder", lab_dir(args.lab))
@@ -316,6 +368,10 @@ def run(args: argparse.Namespace) -> int:
         if args.tcp is not None:
             raise CommandError("the centroid simulator serves on a pseudo-terminal only (--pty)")
         options = centroid_options_from_args(args)
+        if args.model_out is not None and options.motion != "walk":
+            raise CommandError(
+                "--model-out: the marker model is the walking body's (--motion walk)"
+            )
         if args.model_out is not None:
             write_body_model(args.model_out, options.markers, options.seed)
         return _serve(args, serve_centroid_pty(options))
@@ -326,6 +382,8 @@ def run(args: argparse.Namespace) -> int:
     if args.input:
         raise CommandError("--input wires timer inputs; selspot systems have none")
     options = options_from_args(args)
+    if args.frame_points_out is not None:
+        _write_frame_points(args.frame_points_out, options)
     server = (
         service.serve_tcp(options, port=args.tcp)
         if args.tcp is not None

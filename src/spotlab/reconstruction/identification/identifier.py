@@ -19,6 +19,7 @@ One :class:`Identifier` per recording or live stream. Per frame:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -212,6 +213,50 @@ class Identifier:
         tracks.keep(tracks.missed <= self.bridge_frames)
         self._label()
         return self._result(flags)
+
+    def current_points(self) -> FloatArray:
+        """Points of the last frame (K, 3) mm that are not reflections, labelled or not,
+        in the order :meth:`seed_labels` takes."""
+        tracks = self.tracks
+        return np.asarray(tracks.position[(tracks.missed == 0) & ~tracks.ghost])
+
+    def seed_labels(self, marker_of: Any) -> int:
+        """Give labels to the last frame's points from outside (a template fit).
+
+        For a trial that starts in a known pose (a range-of-motion trial starting in the
+        static pose): the labels are then carried by tracking and checked against the
+        model every frame like any other (an inconsistent one is dropped).
+
+        Parameters
+        ----------
+        marker_of : array_like of int, shape (K,)
+            Marker (index into the model's labels) of each point of
+            :meth:`current_points`, -1 to leave a point as it is.
+
+        Returns
+        -------
+        int
+            Points labelled.
+
+        Raises
+        ------
+        ReconstructionError
+            For a shape that differs from :meth:`current_points`'s, an unknown marker or
+            a marker given twice.
+        """
+        tracks = self.tracks
+        rows = np.flatnonzero((tracks.missed == 0) & ~tracks.ghost)
+        marker = np.asarray(marker_of, dtype=np.intp)
+        if marker.shape != rows.shape:
+            raise ReconstructionError(f"marker_of must have shape {rows.shape}")
+        give = marker >= 0
+        if np.any(marker >= len(self.model.labels)) or np.unique(marker[give]).size < give.sum():
+            raise ReconstructionError("marker_of names an unknown marker or one twice")
+        tracks.label[np.isin(tracks.label, marker[give])] = -1
+        tracks.label[rows[give]] = marker[give]
+        tracks.age[rows[give]] = 0
+        self._update_anchors()
+        return int(give.sum())
 
     def _new_tracks(
         self, xy: FloatArray, camera: IntArray, free: NDArray[np.bool_], used: NDArray[np.bool_]

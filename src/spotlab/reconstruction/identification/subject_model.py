@@ -1,0 +1,216 @@
+"""A new subject's marker models: the first from a template fit, the final from a ROM trial.
+
+:func:`first_model` makes the subject's first model M0 from a static trial: the
+template's structure (segments, links) with the subject's own static coordinates for
+the segments (markers the static trial missed take the fitted template's place), and
+the template's link ranges scaled to the subject and placed about the subject's own
+static distances (:meth:`Template.model`). M0 labels a range-of-motion (ROM) trial
+(:class:`~spotlab.reconstruction.identification.Identifier`), and :func:`learn_model`
+learns the final model from those labelled trajectories: segment layouts averaged over
+the trial (:meth:`MarkerModel.from_trajectories` with the template's segments), each
+link's range the one seen in the trial (its 0.5-99.5 percentiles: a few wrong
+labels do not widen it), widened by ``margin_mm``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.core.errors import ReconstructionError
+from spotlab.geometry import Rig
+from spotlab.reconstruction.identification.blobs import BlobFrame
+from spotlab.reconstruction.identification.identifier import Identifier
+from spotlab.reconstruction.identification.model import Link, MarkerModel, Segment
+from spotlab.reconstruction.identification.template import Template, TemplateFit, fit_template
+
+__all__ = [
+    "FIRST_MARGIN_MM",
+    "LEARN_MARGIN_MM",
+    "first_model",
+    "label_trial",
+    "learn_model",
+    "static_pose",
+    "subject_template",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Widening of M0's link ranges each way (mm): soft tissue and the static trial's sway.
+FIRST_MARGIN_MM = 15.0
+#: Widening of the learnt link ranges each way (mm).
+LEARN_MARGIN_MM = 5.0
+#: Percentiles of the distances seen left out at each end of a learnt range.
+TRIM_PERCENT = 0.5
+#: Other pairs whose distance varies less than this in the ROM trial become links (mm).
+LINK_SPREAD_MM = 60.0
+#: Frames a link must be seen in, in the ROM trial, for its range to be learnt.
+MIN_LINK_FRAMES = 20
+
+
+def static_pose(points: Any, fit: TemplateFit, template: Template) -> FloatArray:
+    """The subject's static marker positions (M, 3) mm in the template's label order:
+    the matched point of each marker, the fitted template's position where none matched."""
+    P = np.asarray(points, dtype=np.float64)
+    X = fit.transform(template.neutral_mm)
+    ok = fit.point_of >= 0
+    X[ok] = P[fit.point_of[ok]]
+    return np.asarray(X)
+
+
+def first_model(
+    points: Any, fit: TemplateFit, template: Template, *, margin_mm: float = FIRST_MARGIN_MM
+) -> MarkerModel:
+    """The subject's first model M0 from its static cloud and the template fit.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 3)
+        The static cloud :func:`.fit_template` was given (mm).
+    fit : TemplateFit
+    template : Template
+    margin_mm : float
+        Widening of every link range, each way (mm).
+
+    Returns
+    -------
+    MarkerModel
+    """
+    return template.model(static_pose(points, fit, template), scale=fit.scale, margin_mm=margin_mm)
+
+
+def subject_template(
+    points: Any, fit: TemplateFit, template: Template, model: MarkerModel
+) -> Template:
+    """The subject's own static pose as a template (its body frame, its own size), with
+    ``model``'s structure: what :func:`label_trial` fits to a trial's first frame."""
+    X = static_pose(points, fit, template)
+    body = (X - fit.translation) @ fit.rotation  # rotation only: the subject's own size
+    segments = {s.name: tuple(model.labels[m] for m in s.markers) for s in model.segments}
+    return Template(
+        f"{template.name} (subject)", model.labels, body, segments, model.links,
+        f"static pose fitted to template {template.name!r}",
+    )  # fmt: skip
+
+
+def label_trial(
+    rig: Rig,
+    frames: Iterable[tuple[BlobFrame, Any]],
+    model: MarkerModel,
+    start: Template | None = None,
+    **identifier_options: Any,
+) -> tuple[FloatArray, TemplateFit | None]:
+    """Label a trial with ``model``: a ROM trial, to learn the final model from.
+
+    Parameters
+    ----------
+    rig : Rig
+    frames : iterable of (BlobFrame, unusable)
+        Each frame's blobs and its unusable cameras (or None).
+    model : MarkerModel
+    start : Template, optional
+        The subject's static pose (:func:`subject_template`): the trial starts in it, and
+        the first frame's points are labelled by fitting it (:func:`.fit_template`),
+        then carried by tracking; the model's links alone cannot tell apart markers close
+        together on a cold start. None: the identifier alone.
+    **identifier_options
+        Passed to :class:`Identifier`.
+
+    Returns
+    -------
+    positions : ndarray, shape (F, M, 3)
+        Labelled positions (mm), NaN where a marker was not labelled.
+    fit : TemplateFit or None
+        The fit of ``start`` to the first frame.
+
+    Raises
+    ------
+    ReconstructionError
+        When the first frame does not fit ``start`` (the trial does not start in the
+        static pose).
+    """
+    identify = Identifier(rig, model, **identifier_options)
+    out = []
+    fit = None
+    for f, (frame, unusable) in enumerate(frames):
+        result = identify(frame, unusable)
+        if f == 0 and start is not None:
+            fit = fit_template(identify.current_points(), start)
+            identify.seed_labels(fit.marker_of)
+            result = identify(frame, unusable)  # the frame again, its labels checked
+        out.append(result.points)
+    if not out:
+        raise ReconstructionError("the trial has no frames")
+    return np.stack(out), fit
+
+
+def learn_model(
+    model: MarkerModel,
+    positions: Any,
+    *,
+    margin_mm: float = LEARN_MARGIN_MM,
+    min_frames: int = MIN_LINK_FRAMES,
+    trim_percent: float = TRIM_PERCENT,
+    link_spread_mm: float | None = LINK_SPREAD_MM,
+) -> MarkerModel:
+    """The final model from trajectories labelled with ``model`` (a ROM trial).
+
+    Parameters
+    ----------
+    model : MarkerModel
+        The model the trajectories were labelled with (its structure is kept).
+    positions : array_like, shape (F, M, 3)
+        Labelled positions (mm) in ``model``'s label order, NaN where unlabelled.
+    margin_mm : float
+        Widening of every learnt link range, each way (mm).
+    min_frames : int
+        A link seen (both markers labelled) in fewer frames keeps ``model``'s range.
+    trim_percent : float
+        The range learnt runs from this percentile of the distances seen to 100 minus
+        it: a few wrong labels in the trial do not widen it.
+    link_spread_mm : float or None
+        Pairs of markers not on a common segment and not yet linked whose distance
+        varied by less than this over the trial become links too (narrow ranges tell
+        nearby points apart); None: the model's links only.
+
+    Returns
+    -------
+    MarkerModel
+
+    Raises
+    ------
+    ReconstructionError
+        For trajectories of another shape, or a segment never labelled complete.
+    """
+    X = np.asarray(positions, dtype=np.float64)
+    M = len(model.labels)
+    if X.ndim != 3 or X.shape[1:] != (M, 3):
+        raise ReconstructionError(f"positions must have shape (F, {M}, 3), got {X.shape}")
+    segments = []
+    for seg in model.segments:  # each layout learnt alone, as a model of its markers
+        names = [model.labels[m] for m in seg.markers]
+        alone = MarkerModel.from_trajectories(names, X[:, list(seg.markers)], {seg.name: names})
+        segments.append(Segment(seg.name, seg.markers, alone.segments[0].coordinates))
+    M = len(model.labels)
+    a, b = np.triu_indices(M, 1)
+    linked = np.zeros((M, M), dtype=bool)
+    for k in model.links:
+        linked[k.a, k.b] = linked[k.b, k.a] = True
+    owner = model.segment_of
+    links = []
+    for i, j in zip(a, b, strict=True):
+        if owner[i] >= 0 and owner[i] == owner[j]:
+            continue
+        d = np.linalg.norm(X[:, i] - X[:, j], axis=1)
+        d = d[np.isfinite(d)]
+        if d.size < min_frames:
+            continue
+        lo, hi = np.percentile(d, [trim_percent, 100.0 - trim_percent])
+        if linked[i, j] or (link_spread_mm is not None and hi - lo < link_spread_mm):
+            links.append(Link(int(i), int(j), max(0.0, lo - margin_mm), hi + margin_mm))
+            linked[i, j] = linked[j, i] = False  # done
+    links.extend(k for k in model.links if linked[k.a, k.b])  # too rarely seen: kept
+    return MarkerModel(model.labels, tuple(segments), tuple(links))
