@@ -72,6 +72,17 @@ def collect(driver: SelspotDriver, n: int, timeout: float = 5.0) -> FrameBlock:
     return FrameBlock.concat(blocks)
 
 
+def commands_until_reset(peer: SpxPeer, timeout: float = 5.0) -> list[str]:
+    """The peer's commands once it has read the driver's last ``RESET:`` (its thread reads
+    what the driver wrote just before closing a moment later)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        sent = peer.sent_commands()
+        if (sent and sent[-1] == "RESET:" and len(sent) > 1) or time.monotonic() > deadline:
+            return sent
+        time.sleep(0.02)
+
+
 def test_table_entry_loads_the_driver() -> None:
     assert load_driver("selspot") is SelspotDriver
 
@@ -89,7 +100,7 @@ def test_session_streams_and_stops(peer: SpxPeer) -> None:
         assert block.seq.tolist() == list(range(len(block)))
         assert np.all(np.diff(block.arrival_ns) >= 0)
         assert driver.device is not None and driver.device.serial_number == "TEST0001"
-    assert peer.sent_commands() == [
+    assert commands_until_reset(peer) == [
         "RESET:",
         "COMM:8",
         "VER:0",
@@ -348,4 +359,4 @@ def test_another_mcs1_family_is_named(tmp_path: Path) -> None:
             driver.start()
         driver.close()
         # The device is sent back to 9600 baud for the right driver.
-        assert peer.sent_commands()[-1] == "RESET:"
+        assert commands_until_reset(peer)[-1] == "RESET:"
