@@ -363,7 +363,7 @@ class CentroidDevice(SelspotDevice):
             "COMM": self._cen_comm, "INIT": self._cen_init, "VER": self._cen_ver,
             "RATE": self._cen_rate, "START": self._cen_start, "STOP": self._cen_stop,
             "CAMS": self._cen_cams, "EXPO": self._cen_expo, "THRS": self._cen_thrs,
-            "BLOB": self._cen_blob,
+            "BLOB": self._cen_blob, "CONF": self._cen_conf,
         }  # fmt: skip
 
     def _cen_comm(self, cmd: Command, t: int) -> None:
@@ -394,6 +394,15 @@ class CentroidDevice(SelspotDevice):
         self._not_streaming()
         self._cconfig.camera_mask = self._int_param(cmd, 1, (1 << len(self.rig.cameras)) - 1)
         return self._configured()
+
+    def _cen_conf(self, cmd: Command, t: int) -> str:
+        """The configuration in force, as the commands that set it (centroid.md §2)."""
+        self._no_params(cmd)
+        c = self._cconfig
+        return (
+            f"CONF RATE={c.rate_mhz} CAMS={c.camera_mask} EXPO={c.exposure_us} "
+            f"THRS={c.threshold} BLOB={c.max_blobs}"
+        )
 
     def _cen_expo(self, cmd: Command, t: int) -> str:
         self._not_streaming()

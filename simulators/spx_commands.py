@@ -65,6 +65,7 @@ class SpxCommands:
             "STOP": self._cmd_stop, "STAT": self._cmd_stat, "TIME": self._cmd_time,
             "CAMS": self._cmd_cams, "LEDT": self._cmd_ledt, "LEDQ": self._cmd_ledq,
             "SLOT": self._cmd_slot, "BGND": self._cmd_bgnd, "AGC": self._cmd_agc,
+            "CONF": self._cmd_conf,
         }  # fmt: skip
 
     def _not_streaming(self) -> None:
@@ -157,6 +158,18 @@ class SpxCommands:
         if not self._config.table:
             raise CommandError(0x82)
         return "LEDQ " + "".join(f"{i:02X}{c:02X}" for i, c in self._config.table)
+
+    def _cmd_conf(self, cmd: Command, t: int) -> str:
+        """The configuration in force, as the commands that set it (mcs1.md §3)."""
+        self._no_params(cmd)
+        c = self._config
+        words = [
+            f"RATE={c.rate_mhz}", f"CAMS={c.cameras}", f"SLOT={c.slot_us}", f"BGND={c.bgnd}",
+            f"AGC={int(c.agc_on)},{c.agc_target}",
+        ]  # fmt: skip
+        if c.table:
+            words.append("LEDT=" + "".join(f"{i:02X}{cur:02X}" for i, cur in c.table))
+        return "CONF " + " ".join(words)
 
     def _cmd_stat(self, cmd: Command, t: int) -> str:
         self._no_params(cmd)

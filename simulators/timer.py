@@ -352,7 +352,7 @@ class TimerDevice(SelspotDevice):
             "INIT": self._tmr_init, "VER": self._tmr_ver, "RATE": self._tmr_rate,
             "START": self._tmr_start, "STOP": self._tmr_stop, "EDGS": self._tmr_edgs,
             "ARM": self._tmr_arm, "PULS": self._tmr_puls, "POUT": self._tmr_pout,
-            "TCOD": self._tmr_tcod,
+            "TCOD": self._tmr_tcod, "CONF": self._tmr_conf,
         }  # fmt: skip
 
     def _tmr_init(self, cmd: Command, t: int) -> str:
@@ -369,6 +369,13 @@ class TimerDevice(SelspotDevice):
         self._not_streaming()
         self._tconfig.rate_mhz = self._int_param(cmd, 1_000, 10_000_000)
         return self._configured()
+
+    def _tmr_conf(self, cmd: Command, t: int) -> str:
+        """The configuration in force, as the commands that set it (timer.md §2)."""
+        self._no_params(cmd)
+        c = self._tconfig
+        tc = "0" if c.timecode is None else f"1,{c.timecode[0]},{int(c.timecode[1])}"
+        return f"CONF RATE={c.rate_mhz} EDGS={c.slots} TCOD={tc}"
 
     def _tmr_edgs(self, cmd: Command, t: int) -> str:
         self._not_streaming()

@@ -9,9 +9,10 @@ recovery is :class:`Mcs1Driver`'s.
 from __future__ import annotations
 
 import os
-from typing import ClassVar
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
-from spotlab.core.errors import ConfigurationError
+from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.base import DeviceInfo
 from spotlab.drivers.centroid.config import CEN_BAUD_CODES, CentroidConfig
@@ -38,13 +39,17 @@ class CentroidDriver(Mcs1Driver):
     name : str, optional
         Stream name; ``"centroid"`` by default.
     cameras : int, optional
-        Enable cameras 0 .. cameras-1 (default 8); or give ``camera_mask``.
+        Enable cameras 0 .. cameras-1; or give ``camera_mask``.
     camera_mask : int, optional
         Enabled cameras as a bit mask.
-    rate_hz : float
-        Frame rate in Hz (default 100).
-    exposure_us, threshold, max_blobs : int
-        ``EXPO``, ``THRS`` and ``BLOB`` (defaults 500 µs, 128, 256).
+    rate_hz : float, optional
+        Frame rate in Hz.
+    exposure_us, threshold, max_blobs : int, optional
+        ``EXPO``, ``THRS`` and ``BLOB``.
+
+    Settings not given (None) keep what the hub reports it has (``CONF:``, read once at
+    :meth:`start`); a hub that does not know ``CONF:`` gets 8 cameras, 100 Hz, 500 µs,
+    threshold 128 and 256 blobs.
     baud : int or "auto"
         Line rate while streaming (default 12 Mbaud).
     reply_timeout, reconnect_timeout : float
@@ -72,19 +77,22 @@ class CentroidDriver(Mcs1Driver):
         name: str | None = None,
         cameras: int | None = None,
         camera_mask: int | None = None,
-        rate_hz: float = 100.0,
-        exposure_us: int = 500,
-        threshold: int = 128,
-        max_blobs: int = 256,
+        rate_hz: float | None = None,
+        exposure_us: int | None = None,
+        threshold: int | None = None,
+        max_blobs: int | None = None,
         baud: int | str = 12_000_000,
         reply_timeout: float = 1.0,
         reconnect_timeout: float | None = None,
     ) -> None:
         super().__init__(port, name=name)
-        self.config = CentroidConfig.create(
-            cameras=cameras, camera_mask=camera_mask, rate_hz=rate_hz, exposure_us=exposure_us,
-            threshold=threshold, max_blobs=max_blobs, baud=baud,
-        )  # fmt: skip
+        given = {
+            "cameras": cameras, "camera_mask": camera_mask, "rate_hz": rate_hz,
+            "exposure_us": exposure_us, "threshold": threshold, "max_blobs": max_blobs,
+        }  # fmt: skip
+        self._asked: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
+        self._fixed: dict[str, Any] = {"baud": baud}
+        self.config = CentroidConfig.create(**self._asked, **self._fixed)
         #: What the hub said of itself (``VER:0``), once started.
         self.device: CentroidVersion | None = None
         self._setup(
@@ -117,6 +125,29 @@ class CentroidDriver(Mcs1Driver):
         return self._decoder
 
     # -- family hooks ----------------------------------------------------------------
+    def _unasked(self) -> list[str]:
+        keys = [k for k in ("rate_hz", "exposure_us", "threshold", "max_blobs")]
+        if "cameras" not in self._asked and "camera_mask" not in self._asked:
+            keys.append("camera_mask")
+        return [k for k in keys if k not in self._asked]
+
+    def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
+        verbs = {"RATE": "rate_hz", "CAMS": "camera_mask", "EXPO": "exposure_us",
+                 "THRS": "threshold", "BLOB": "max_blobs"}  # fmt: skip
+        try:
+            out: dict[str, Any] = {key: int(fields[v]) for v, key in verbs.items() if v in fields}
+        except ValueError:
+            raise ProtocolError(f"{self.port}: CONF reply {fields} has a malformed value") from None
+        if "rate_hz" in out:
+            out["rate_hz"] = out["rate_hz"] / 1000
+        if "cameras" in self._asked:
+            out.pop("camera_mask", None)
+        return out
+
+    def _rebuild(self, device: Mapping[str, Any]) -> tuple[CentroidConfig, CentroidDecoder]:
+        config = CentroidConfig.create(**{**device, **self._asked, **self._fixed})
+        return config, CentroidDecoder(config, stats=self.stats)
+
     def _check_device(self, reply: Reply) -> None:
         self.device = parse_version(reply.text)
         c = self.config

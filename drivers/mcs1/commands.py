@@ -181,6 +181,34 @@ def check_line(line: bytes) -> str | None:
     return text if text.isprintable() else None
 
 
+#: MCS-1 family codes (first word of the ``VER:0`` reply) and spotlab's driver families.
+FAMILY_NAMES = {"SPX": "selspot", "TMR": "timer", "CEN": "centroid"}
+
+
+class WrongFamilyError(ConfigurationError):
+    """A ``VER:0`` reply from a device of another MCS-1 family than the one expected.
+
+    Attributes
+    ----------
+    answered : str
+        The family code the device gave (``"SPX"``).
+    expected : str
+        The family code asked for.
+    text : str
+        The reply text.
+    """
+
+    def __init__(self, answered: str, expected: str, text: str, port: str = "") -> None:
+        self.answered, self.expected, self.text = answered, expected, text
+        family = FAMILY_NAMES.get(answered, answered)
+        where = f" on {port}" if port else ""
+        super().__init__(
+            f"the device{where} is a {family} device ({answered}), not a "
+            f"{FAMILY_NAMES.get(expected, expected)} one ({expected}): it answered VER:0 with "
+            f"{text!r}; use the {family} driver (--driver {family} or --device {family}=PORT)"
+        )
+
+
 def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
     """Parse one reply line (CRC and CR included).
 
@@ -201,6 +229,8 @@ def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
     ProtocolError
         If the line's CRC fails, or it is neither ``OKAY``, ``ERRORxx``,
         ``WARNxx`` nor the expected data reply; the message shows the bytes.
+    WrongFamilyError
+        If ``data_prefix`` is a family code and the reply is another family's ``VER:0``.
     """
     text = check_line(line)
     if text is None:
@@ -215,5 +245,38 @@ def parse_reply(line: bytes, data_prefix: str | None = None) -> Reply:
             raise ProtocolError(f"reply {line!r} has a malformed {word} code")
     if data_prefix is not None and (text == data_prefix or text.startswith(data_prefix + " ")):
         return Reply("data", text, None, bytes(line))
+    word = text.split(" ", 1)[0]
+    if data_prefix in FAMILY_NAMES and word in FAMILY_NAMES:
+        raise WrongFamilyError(word, data_prefix, text)
     expected = "OKAY, ERRORxx or WARNxx" + (f" or '{data_prefix} ...'" if data_prefix else "")
     raise ProtocolError(f"unexpected reply {line!r}: expected {expected}")
+
+
+def parse_conf(text: str) -> dict[str, str]:
+    """The fields of a ``CONF`` reply: verb -> the arguments that verb would take.
+
+    Parameters
+    ----------
+    text : str
+        Reply text, for example ``"CONF RATE=200000 CAMS=2 SLOT=100"``.
+
+    Returns
+    -------
+    dict of str to str
+        ``{"RATE": "200000", "CAMS": "2", "SLOT": "100"}``.
+
+    Raises
+    ------
+    ProtocolError
+        If the text is not ``CONF`` followed by ``VERB=ARGS`` words.
+    """
+    words = text.split(" ")
+    if not words or words[0] != "CONF":
+        raise ProtocolError(f"reply {text!r} to CONF does not start with 'CONF'")
+    fields: dict[str, str] = {}
+    for word in words[1:]:
+        verb, sep, args = word.partition("=")
+        if not sep or not verb.isalpha() or not verb.isupper():
+            raise ProtocolError(f"reply {text!r} to CONF: {word!r} is not VERB=ARGS")
+        fields[verb] = args
+    return fields

@@ -48,6 +48,7 @@ from spotlab.drivers.mcs1.commands import (
     DeviceConfigurationError,
     Reply,
     encode_command,
+    parse_conf,
     parse_reply,
 )
 from spotlab.drivers.mcs1.framing import EventFrame
@@ -178,12 +179,18 @@ class Mcs1Driver(Driver):
         self.reply_timeout = reply_timeout
         self.reconnect_timeout = reconnect_timeout
         self._decoder = decoder
+        #: Whether the settings not given are still to be read from the device (``CONF:``).
+        self._adopt_pending = bool(self._unasked())
         self._link = SerialLink(self.port, on_rx=self._tap_rx, on_tx=self._tap_tx)
         self._channel = CommandChannel(self._link, reply_timeout, self.stats)
         self._streaming = False
         self._stash: list[FrameBlock] = []
         self._recovering: str | None = None
         self._outage_start = 0.0
+        self._retime(config)
+
+    def _retime(self, config: Mcs1Config) -> None:
+        """Silence and flush thresholds of ``config``'s frame rate and size."""
         period_s = 1.0 / config.rate_hz
         self._silence_ns = int(max(SILENCE_S, 20 * period_s) * 1e9)
         send_s = config.frame_bytes * 10 / config.baud
@@ -194,6 +201,48 @@ class Mcs1Driver(Driver):
         # (a device at another baud rate), not a host that fell behind.
         self._rx_since_frame = 0
         self._garbage_bytes = 2 * max(config.frame_bytes, MIN_FRAME_WINDOW)
+
+    # -- settings the user did not give: the device's own (CONF:) ---------------------
+    def _unasked(self) -> list[str]:
+        """Settings the user left to the device (the family lists them); none by default."""
+        return []
+
+    def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
+        """The family's ``create`` keywords from a ``CONF`` reply's fields (family hook)."""
+        return {}
+
+    def _rebuild(self, device: Mapping[str, Any]) -> tuple[Mcs1Config, Mcs1Decoder]:
+        """Configuration and decoder from the device's settings overlaid by the user's."""
+        raise NotImplementedError
+
+    def _adopt_device_config(self) -> None:
+        """Read the device's configuration (``CONF:``) and keep it for every setting the
+        user did not give; once, at the first start (a reconnection sends the same).
+
+        A device that does not know ``CONF:`` (``ERROR01``, or a bare ``OKAY``) gets the
+        driver's defaults.
+        """
+        if not self._adopt_pending:
+            return
+        try:
+            reply: Reply | None = self._channel.transact("CONF", data_prefix="CONF")
+        except DeviceError as exc:
+            if exc.code != 0x01:
+                raise
+            reply = None
+        if reply is None or reply.kind != "data":  # ERROR01 (unknown verb), or a bare OKAY
+            log.warning(
+                "%s: the device does not report its configuration (CONF:); %s take the "
+                "driver's defaults",
+                self.port,
+                ", ".join(self._unasked()),
+            )
+            self._adopt_pending = False
+            return
+        config, decoder = self._rebuild(self._device_settings(parse_conf(reply.text)))
+        self.config, self._decoder = config, decoder
+        self._retime(config)
+        self._adopt_pending = False
 
     @abstractmethod
     def _check_device(self, reply: Reply) -> None:
@@ -255,6 +304,12 @@ class Mcs1Driver(Driver):
         c = self.config
         reply = self._channel.negotiate(c.baud, self.family_code, self.baud_codes)
         self._tap_event("baud_change", baud=c.baud)
+        if self._adopt_pending:  # the family was checked by negotiate (VER:0)
+            self._adopt_device_config()
+            if self.config.baud != c.baud:  # "auto" for the device's own rate
+                reply = self._channel.negotiate(self.config.baud, self.family_code, self.baud_codes)
+                self._tap_event("baud_change", baud=self.config.baud)
+            c = self.config
         self._check_device(reply)
         for verb, args in c.commands():
             self._channel.transact(verb, args)
@@ -309,6 +364,10 @@ class Mcs1Driver(Driver):
         try:
             self._link.write(encode_command("STOP"))
             self._await_event_reply("STOP:", okay_only=True)
+            # Leave the device as it powers up (9600 baud, its defaults), where the next
+            # program (another driver, `spotlab devices --probe`) finds it.
+            self._link.write(encode_command("RESET"))
+            self._link.set_baud(RESET_BAUD)
         except DeviceDisconnected as exc:
             log.warning("%s: port lost while stopping: %s", self.port, exc)
         except DeviceTimeout as exc:

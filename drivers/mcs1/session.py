@@ -23,13 +23,14 @@ import logging
 import time
 from collections.abc import Mapping
 
-from spotlab.core.errors import DeviceTimeout, ProtocolError
+from spotlab.core.errors import DeviceError, DeviceTimeout, ProtocolError
 from spotlab.core.stats import LinkStats
 from spotlab.drivers.mcs1.commands import (
     BANNER,
     BAUD_CODES,
     RESET_BAUD,
     Reply,
+    WrongFamilyError,
     check_line,
     encode_command,
     parse_reply,
@@ -269,6 +270,17 @@ class CommandChannel:
         return self.read_reply(command, data_prefix, timeout).raise_for_error(command)
 
     # -- baud rate -----------------------------------------------------------------
+    def _check_family(self, family_code: str) -> None:
+        """``VER:0`` at the current rate: :class:`WrongFamilyError` naming the family that
+        answered when it is another MCS-1 family; any other outcome is left to the caller."""
+        command = self.send("VER", "0")
+        try:
+            self.read_reply(command, data_prefix=family_code)
+        except WrongFamilyError as exc:
+            raise WrongFamilyError(exc.answered, exc.expected, exc.text, self.link.url) from None
+        except (DeviceError, ProtocolError):
+            pass
+
     def negotiate(
         self, baud: int, family_code: str, codes: Mapping[int, int] = BAUD_CODES
     ) -> Reply:
@@ -298,7 +310,10 @@ class CommandChannel:
         """
         if baud != RESET_BAUD:
             command = self.send("COMM", str(codes[baud]))
-            self.read_reply(command, ignore_banner=True).raise_for_error(command)
+            reply = self.read_reply(command, ignore_banner=True)
+            if reply.kind == "error":
+                self._check_family(family_code)
+            reply.raise_for_error(command)
             self.link.set_baud(baud)
         command = self.send("VER", "0")
         try:
@@ -310,6 +325,10 @@ class CommandChannel:
                 f"no answer to VER:0 from {self.link.url} at {baud} baud after switching "
                 f"from {RESET_BAUD}; the port or adapter may not support this rate"
             ) from exc
+        except WrongFamilyError as exc:
+            # Leave the device at 9600 baud, where the right driver finds it.
+            self.link.write(encode_command("RESET"))
+            raise WrongFamilyError(exc.answered, exc.expected, exc.text, self.link.url) from None
         except ProtocolError as exc:
             raise ProtocolError(f"{exc} (at {baud} baud after switching from 9600)") from exc
         return reply.raise_for_error(command)

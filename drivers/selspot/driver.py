@@ -20,11 +20,10 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from typing import Any
 
-from spotlab.core.errors import (
-    ConfigurationError,
-)
+from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.base import DeviceInfo
 from spotlab.drivers.mcs1.commands import Reply
@@ -41,6 +40,10 @@ from spotlab.drivers.selspot.protocol import (
 
 log = logging.getLogger(__name__)
 
+#: ``create`` keywords the device keeps when they are not given, by ``CONF`` verb.
+_DEVICE_KEYS_BY_VERB = {"CAMS": "cameras", "RATE": "rate_hz", "SLOT": "slot_us", "BGND": "bgnd"}
+_DEVICE_KEYS = ("cameras", "leds", "rate_hz", "slot_us", "bgnd")
+
 
 class SelspotDriver(Mcs1Driver):
     """Driver of an SPX lateral-photodiode camera system.
@@ -51,17 +54,22 @@ class SelspotDriver(Mcs1Driver):
         Device path (``/dev/ttyUSB0``) or pyserial URL (``socket://``, ``sim://``).
     name : str, optional
         Stream name; ``"selspot"`` by default.
-    cameras : int
+    cameras : int, optional
         Number of cameras, 1-4.
-    leds : int or sequence
+    leds : int or sequence, optional
         LED count (ids 0..N-1 at 32 mA), list of ids, or list of
         ``(id, drive current in 1/4 mA)`` in firing order.
-    rate_hz : float
+    rate_hz : float, optional
         Frame rate in Hz.
-    slot_us : int
+    slot_us : int, optional
         Slot period in µs, 50-1000.
-    bgnd : int
+    bgnd : int, optional
         Background differencing: 0 none, 1 dark sample per slot, 2 dark slot per frame.
+
+    Of ``cameras``, ``leds``, ``rate_hz``, ``slot_us`` and ``bgnd``, those not given (None)
+    keep what the device reports it has (``CONF:``, read once at :meth:`start`); a device
+    without a LED table gets 8 LEDs, one that does not know ``CONF:`` the values of
+    :meth:`SelspotConfig.create` (1 camera, 8 LEDs, 100 Hz, 100 µs, mode 1).
     agc : int or None
         AGC target intensity (AGC on), or ``None`` (AGC off).
     baud : int or "auto"
@@ -91,26 +99,22 @@ class SelspotDriver(Mcs1Driver):
         port: str | os.PathLike[str],
         *,
         name: str | None = None,
-        cameras: int = 1,
-        leds: int | Iterable[int | tuple[int, int]] = 8,
-        rate_hz: float = 100.0,
-        slot_us: int = 100,
-        bgnd: int = 1,
+        cameras: int | None = None,
+        leds: int | Iterable[int | tuple[int, int]] | None = None,
+        rate_hz: float | None = None,
+        slot_us: int | None = None,
+        bgnd: int | None = None,
         agc: int | None = None,
         baud: int | str = 2_000_000,
         reply_timeout: float = 1.0,
         reconnect_timeout: float | None = None,
     ) -> None:
         super().__init__(port, name=name)
-        self.config = SelspotConfig.create(
-            cameras=cameras,
-            leds=leds,
-            rate_hz=rate_hz,
-            slot_us=slot_us,
-            bgnd=bgnd,
-            agc=agc,
-            baud=baud,
-        )
+        given = {"cameras": cameras, "leds": leds, "rate_hz": rate_hz, "slot_us": slot_us,
+                 "bgnd": bgnd}  # fmt: skip
+        self._asked: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
+        self._fixed: dict[str, Any] = {"agc": agc, "baud": baud}
+        self.config = SelspotConfig.create(**self._asked, **self._fixed)
         #: What the device said of itself (``VER:0``), once started.
         self.device: DeviceVersion | None = None
         self._setup(
@@ -144,6 +148,32 @@ class SelspotDriver(Mcs1Driver):
         return self._decoder
 
     # -- family hooks ----------------------------------------------------------------
+    def _unasked(self) -> list[str]:
+        return [k for k in _DEVICE_KEYS if k not in self._asked]
+
+    def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
+        try:
+            out: dict[str, Any] = {
+                key: int(fields[verb])
+                for verb, key in _DEVICE_KEYS_BY_VERB.items()
+                if verb in fields
+            }
+            if "rate_hz" in out:
+                out["rate_hz"] = out["rate_hz"] / 1000
+            table = fields.get("LEDT", "")
+            if table:
+                out["leds"] = [
+                    (int(table[i : i + 2], 16), int(table[i + 2 : i + 4], 16))
+                    for i in range(0, len(table), 4)
+                ]
+        except ValueError:
+            raise ProtocolError(f"{self.port}: CONF reply {fields} has a malformed value") from None
+        return out
+
+    def _rebuild(self, device: Mapping[str, Any]) -> tuple[SelspotConfig, SelspotDecoder]:
+        config = SelspotConfig.create(**{**device, **self._asked, **self._fixed})
+        return config, SelspotDecoder.from_config(config, stats=self.stats)
+
     def _check_device(self, reply: Reply) -> None:
         c = self.config
         self.device = parse_version(reply.text)

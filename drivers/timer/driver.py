@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from typing import Any
 
 from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.streams import StreamSpec
@@ -37,15 +38,19 @@ class TimerDriver(Mcs1Driver):
         Device path or pyserial URL (``sim://timer?...``).
     name : str, optional
         Stream name; ``"timer"`` by default.
-    rate_hz : float
-        Timer frame rate in Hz (default 100).
-    slots : int
-        Edge record slots per frame (default 8).
+    rate_hz : float, optional
+        Timer frame rate in Hz.
+    slots : int, optional
+        Edge record slots per frame.
     inputs : mapping of int to str, optional
         Input -> ``"rising"``, ``"falling"``, ``"both"`` or ``"off"``; default
         every input armed for rising edges (frame pulses rise at frame start).
     timecode : (int, bool), optional
         ``(fps, drop_frame)`` to have LTC labels in every frame.
+
+    ``rate_hz``, ``slots`` and ``timecode`` not given (None) keep what the unit reports it
+    has (``CONF:``, read once at :meth:`start`); a unit that does not know ``CONF:`` gets
+    100 Hz, 8 slots and no timecode.
     baud : int or "auto"
         Line rate while streaming.
     reply_timeout, reconnect_timeout : float
@@ -70,8 +75,8 @@ class TimerDriver(Mcs1Driver):
         port: str | os.PathLike[str],
         *,
         name: str | None = None,
-        rate_hz: float = 100.0,
-        slots: int = 8,
+        rate_hz: float | None = None,
+        slots: int | None = None,
         inputs: Mapping[int, str] | None = None,
         timecode: tuple[int, bool] | None = None,
         baud: int | str = 2_000_000,
@@ -79,9 +84,10 @@ class TimerDriver(Mcs1Driver):
         reconnect_timeout: float | None = None,
     ) -> None:
         super().__init__(port, name=name)
-        self.config = TimerConfig.create(
-            rate_hz=rate_hz, slots=slots, inputs=inputs, timecode=timecode, baud=baud
-        )
+        given = {"rate_hz": rate_hz, "slots": slots, "timecode": timecode}
+        self._asked: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
+        self._fixed: dict[str, Any] = {"inputs": inputs, "baud": baud}
+        self.config = TimerConfig.create(**self._asked, **self._fixed)
         #: What the unit said of itself (``VER:0``), once started.
         self.device: TimerVersion | None = None
         self._setup(
@@ -129,6 +135,27 @@ class TimerDriver(Mcs1Driver):
         return value - (1 << 64) if value >= 1 << 63 else value
 
     # -- family hooks ----------------------------------------------------------------
+    def _unasked(self) -> list[str]:
+        return [k for k in ("rate_hz", "slots", "timecode") if k not in self._asked]
+
+    def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        try:
+            if "RATE" in fields:
+                out["rate_hz"] = int(fields["RATE"]) / 1000
+            if "EDGS" in fields:
+                out["slots"] = int(fields["EDGS"])
+            tc = [int(v) for v in fields.get("TCOD", "0").split(",")]
+            if tc[0] == 1 and len(tc) == 3:
+                out["timecode"] = (tc[1], bool(tc[2]))
+        except ValueError:
+            raise ProtocolError(f"{self.port}: CONF reply {fields} has a malformed value") from None
+        return out
+
+    def _rebuild(self, device: Mapping[str, Any]) -> tuple[TimerConfig, TimerDecoder]:
+        config = TimerConfig.create(**{**device, **self._asked, **self._fixed})
+        return config, TimerDecoder.from_config(config, stats=self.stats)
+
     def _check_device(self, reply: Reply) -> None:
         self.device = parse_version(reply.text)
         if self.device.inputs < MAX_INPUTS or self.device.tick_hz != TICK_HZ:

@@ -269,6 +269,11 @@ class Session:
         """
         self._shutdown(raise_errors=True)
 
+    def request_stop(self) -> None:
+        """Ask :meth:`run_for` to end soon; safe from a signal handler or another thread
+        (it only sets an event; :meth:`run_for` then stops the session as usual)."""
+        self._stop_event.set()
+
     def __enter__(self) -> Session:
         self.start()
         return self

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for
+from spotlab.console.decoding import decoder_for, input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.progress import Progress
 from spotlab.core.errors import CalibrationError, ReconstructionError, RecordingError
@@ -130,7 +130,7 @@ def _stream_kinds(path: Path) -> list[tuple[str, str | None]]:
 
 def is_blob_recording(path: Path) -> bool:
     """True when ``path`` is a recording (``.spj``) whose streams are all ``blobs2d``."""
-    if path.suffix.lower() != ".spj" or not path.is_file():
+    if input_suffix(path) != ".spj" or not path.is_file():
         return False
     try:
         kinds = _stream_kinds(path)

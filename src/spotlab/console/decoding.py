@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 from typing import Any
 
 from spotlab.core.errors import RecordingError
 from spotlab.core.wire import StreamDecoder
 from spotlab.drivers import DRIVERS, load_driver
+from spotlab.io.journal import is_journal
+
+#: The suffix a recording journal is taken for, whatever its name.
+JOURNAL_SUFFIX = ".spj"
 
 
 def decoder_for(metadata: dict[str, Any]) -> StreamDecoder:
@@ -40,3 +45,9 @@ def decoder_for(metadata: dict[str, Any]) -> StreamDecoder:
     except (KeyError, TypeError, ValueError) as exc:
         raise RecordingError(f"metadata of a {family!r} stream is incomplete: {exc}") from exc
     return decoder
+
+
+def input_suffix(path: Path) -> str:
+    """The format of an input file: ``".spj"`` for a recording journal, recognised by its
+    magic bytes whatever its name, else the file name's suffix (lower case)."""
+    return JOURNAL_SUFFIX if is_journal(path) else path.suffix.lower()

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.npz import number, numeric_array, read_npz
 from spotlab.console.recorded_observations import frame_numbers, read_selspot, usable_counts
@@ -78,7 +79,7 @@ def load_observations(path: Path) -> MarkerObservations:
     """
     if not path.is_file():
         raise CommandError(f"{path}: no such file")
-    suffix = path.suffix.lower()
+    suffix = input_suffix(path)
     if suffix == ".npz":
         return _load_npz(path)
     if suffix == ".csv":

@@ -23,11 +23,16 @@ from spotlab.acquisition.timebase import (
 )
 from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
+from spotlab.core.errors import RecordingError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.timer import extract_edges
+from spotlab.io.journal import JournalReader, is_journal
 
 TIMER_FAMILY = "timer"
+#: Session metadata key of the timer's input wiring (stream name -> input), written by
+#: ``spotlab record --lab/--wiring``.
+WIRING_KEY = "timer_wiring"
 
 
 @dataclass(frozen=True)
@@ -109,12 +114,67 @@ def read_streams(
     return devices, (timers[0] if timers else None), specs
 
 
+def recorded_wiring(path: str | os.PathLike[str]) -> dict[str, int]:
+    """The timer wiring stored in a recording's session metadata (empty if none)."""
+    try:
+        session = JournalReader(path).session
+    except RecordingError as exc:
+        raise CommandError(str(exc)) from None
+    stored = session.get(WIRING_KEY)
+    if not isinstance(stored, dict):
+        return {}
+    return {
+        str(k): int(v) for k, v in stored.items() if isinstance(v, int) and not isinstance(v, bool)
+    }
+
+
+def recorded_rig(path: str | os.PathLike[str]) -> Path | None:
+    """The rig of the lab file a recording was made with (``spotlab record --lab``), or
+    None when it names none or is not a recording."""
+    if not is_journal(path):
+        return None
+    try:
+        lab = JournalReader(path).session.get("lab")
+    except RecordingError:
+        return None
+    rig = lab.get("rig") if isinstance(lab, dict) else None
+    return Path(rig) if isinstance(rig, str) and rig else None
+
+
+def calibration_for(path: str | os.PathLike[str], given: Path | None) -> Path:
+    """``--calibration`` when given, else the rig the recording's lab file names.
+
+    Raises
+    ------
+    CommandError
+        When neither gives one.
+    """
+    rig = given if given is not None else recorded_rig(path)
+    if rig is None:
+        raise CommandError(
+            f"{path}: reconstructing it needs --calibration RIG.toml (the recording names "
+            "no rig: it was not made with a lab file that has one)"
+        )
+    return rig
+
+
+def effective_wiring(
+    path: str | os.PathLike[str], given: Mapping[str, int] | None
+) -> dict[str, int] | None:
+    """``--wiring`` when given, else the recording's stored wiring, else None (found from
+    the edges)."""
+    if given:
+        return dict(given)
+    return recorded_wiring(path) or None
+
+
 def recording_timebase(
     path: str | os.PathLike[str], wiring: Mapping[str, int] | None = None
 ) -> SessionTimebase:
-    """The session time base of a recording (see :func:`session_timebase`)."""
+    """The session time base of a recording (see :func:`session_timebase`); without
+    ``wiring``, the wiring the recording stores (:func:`recorded_wiring`) is used."""
     devices, timer, _ = read_streams(path)
-    return session_timebase(devices, timer, wiring)
+    return session_timebase(devices, timer, effective_wiring(path, wiring))
 
 
 def parse_wiring(items: list[str]) -> dict[str, int]:

@@ -42,7 +42,12 @@ from spotlab.acquisition.timebase import SessionTimebase, session_timebase
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import MarkerObservations
 from spotlab.console.progress import Progress
-from spotlab.console.session_times import DecodedStreams, decode_streams, read_streams
+from spotlab.console.session_times import (
+    DecodedStreams,
+    decode_streams,
+    effective_wiring,
+    read_streams,
+)
 from spotlab.console.trajectories import (
     Reconstruction,
     load_rig,
@@ -330,7 +335,7 @@ def export_synchronised(
     decoded = decode_streams(recording) if decoded is None else decoded
     devices, timer, _ = read_streams(recording, decoded)
     try:
-        timebase = session_timebase(devices, timer, wiring)
+        timebase = session_timebase(devices, timer, effective_wiring(recording, wiring))
     except SynchronisationError as exc:
         raise CommandError(f"{recording}: {exc}") from None
     streams, notes = image_streams(decoded, timebase)

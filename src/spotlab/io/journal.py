@@ -21,6 +21,8 @@ Examples
 
 from __future__ import annotations
 
+import os
+
 from spotlab.io._journal_format import (
     FILE_MAGIC,
     FORMAT_VERSION,
@@ -34,6 +36,17 @@ from spotlab.io._journal_format import (
 )
 from spotlab.io._journal_reader import JournalFacts, JournalReader, Record
 from spotlab.io._journal_writer import JournalWriter
+
+
+def is_journal(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a regular file that starts with the journal's magic bytes
+    (:data:`FILE_MAGIC`), whatever its name ends in."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(FILE_MAGIC)) == FILE_MAGIC
+    except OSError:
+        return False
+
 
 __all__ = [
     "FILE_MAGIC",
@@ -49,4 +62,5 @@ __all__ = [
     "RecordType",
     "encode_file_header",
     "encode_record",
+    "is_journal",
 ]

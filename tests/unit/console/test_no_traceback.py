@@ -239,7 +239,7 @@ CASES: list[Case] = [
     ("model-show-plain", lambda f: ["model", "show", str(f["plain"])], ("plain.txt",)),
     ("model-usage", lambda f: ["model", "learn"], ("model learn:",)),
     # usage errors: one prefix, the subcommand named once
-    ("record-usage", lambda f: ["record"], ("record:", "--seconds")),
+    ("record-usage", lambda f: ["record"], ("record:", "--out")),
     ("export-usage", lambda f: ["export"], ("export:",)),
     ("unknown-command", lambda f: ["nonsense"], ("nonsense",)),
     ("info-missing", lambda f: ["info", str(f["dir"] / "missing.spj")], ("missing.spj",)),

@@ -20,7 +20,11 @@ from spotlab.core.errors import (
 )
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers import load_driver
-from spotlab.drivers.mcs1.commands import DeviceBandwidthError, DeviceConfigurationError
+from spotlab.drivers.mcs1.commands import (
+    DeviceBandwidthError,
+    DeviceConfigurationError,
+    WrongFamilyError,
+)
 from spotlab.drivers.selspot import SelspotDriver, decoder_from_metadata
 
 
@@ -50,7 +54,9 @@ def peer(tmp_path: Path) -> Iterator[SpxPeer]:
 
 
 def make_driver(port: str, **kwargs: object) -> SelspotDriver:
-    options: dict[str, object] = {"cameras": 2, "leds": 3, "rate_hz": 200, "reply_timeout": 0.5}
+    options: dict[str, object] = {
+        "cameras": 2, "leds": 3, "rate_hz": 200, "slot_us": 100, "bgnd": 1, "reply_timeout": 0.5
+    }  # fmt: skip
     options.update(kwargs)
     return SelspotDriver(port, **options)  # type: ignore[arg-type]
 
@@ -64,6 +70,17 @@ def collect(driver: SelspotDriver, n: int, timeout: float = 5.0) -> FrameBlock:
             blocks.append(block)
     assert blocks, "no frames"
     return FrameBlock.concat(blocks)
+
+
+def commands_until_reset(peer: SpxPeer, timeout: float = 5.0) -> list[str]:
+    """The peer's commands once it has read the driver's last ``RESET:`` (its thread reads
+    what the driver wrote just before closing a moment later)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        sent = peer.sent_commands()
+        if (sent and sent[-1] == "RESET:" and len(sent) > 1) or time.monotonic() > deadline:
+            return sent
+        time.sleep(0.02)
 
 
 def test_table_entry_loads_the_driver() -> None:
@@ -83,7 +100,7 @@ def test_session_streams_and_stops(peer: SpxPeer) -> None:
         assert block.seq.tolist() == list(range(len(block)))
         assert np.all(np.diff(block.arrival_ns) >= 0)
         assert driver.device is not None and driver.device.serial_number == "TEST0001"
-    assert peer.sent_commands() == [
+    assert commands_until_reset(peer) == [
         "RESET:",
         "COMM:8",
         "VER:0",
@@ -95,8 +112,9 @@ def test_session_streams_and_stops(peer: SpxPeer) -> None:
         "AGC:1,160",
         "START:",
         "STOP:",
+        "RESET:",  # the device is left as it powers up, for the next program
     ]
-    assert b"".join(tap.tx).endswith(b"START:51B4\rSTOP:FD1C\r")
+    assert b"".join(tap.tx).endswith(b"START:51B4\rSTOP:FD1C\rRESET:8A23\r")
     assert b"RESET7DB2\r" in b"".join(tap.rx)
     assert tap.kinds() == ["open", "baud_change", "configured", "started", "stopped", "close"]
     st = driver.stats
@@ -308,3 +326,37 @@ def test_detect_is_quick_and_harmless_with_nothing_attached(
     t0 = time.monotonic()
     assert SelspotDriver.detect() == []
     assert time.monotonic() - t0 < 0.5
+
+
+def test_settings_not_given_keep_the_devices_own(tmp_path: Path) -> None:
+    """Only the LED count is given: rate, cameras, slot and mode are the device's (CONF:)."""
+    conf = line("CONF RATE=150000 CAMS=2 SLOT=120 BGND=2 AGC=0,160")
+    with SpxPeer(tmp_path, answers={"CONF": conf}, rate_hz=150.0) as peer:
+        driver = SelspotDriver(peer.path, leds=3, reply_timeout=0.5)
+        with driver:
+            collect(driver, 3)
+        sent = peer.sent_commands()
+    assert sent[3] == "CONF:"
+    assert {"CAMS:2", "SLOT:120", "RATE:150000", "BGND:2", "LEDT:008001800280"} <= set(sent)
+    assert driver.config.rate_hz == 150.0 and driver.config.cameras == 2
+    assert driver.spec.rate_hz == 150.0 and driver.spec.n_sensors == 2
+
+
+def test_a_device_without_conf_gets_the_defaults(tmp_path: Path) -> None:
+    with SpxPeer(tmp_path, answers={"CONF": line("ERROR01")}) as peer:
+        driver = SelspotDriver(peer.path, reply_timeout=0.5)
+        with driver:
+            collect(driver, 3)
+        sent = peer.sent_commands()
+    assert "RATE:100000" in sent and "CAMS:1" in sent
+    assert driver.config.rate_hz == 100.0
+
+
+def test_another_mcs1_family_is_named(tmp_path: Path) -> None:
+    with SpxPeer(tmp_path, version="TMR 1.0 T1 8 4 10000000") as peer:
+        driver = make_driver(peer.path)
+        with pytest.raises(WrongFamilyError, match=r"timer device \(TMR\).*--driver timer"):
+            driver.start()
+        driver.close()
+        # The device is sent back to 9600 baud for the right driver.
+        assert commands_until_reset(peer)[-1] == "RESET:"

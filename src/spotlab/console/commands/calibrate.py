@@ -27,6 +27,7 @@ from spotlab.console.calibration_inputs import (
     load_npz,
     load_recordings,
 )
+from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.paths import check_output_paths
 from spotlab.geometry import Rig
@@ -143,7 +144,7 @@ def _load(args: argparse.Namespace) -> WandObservations:
         raise CommandError(f"{path}: no such file")
     if args.wand_middle is not None:
         raise CommandError("--wand-middle is for video-centroid (blobs2d) recordings")
-    suffix = path.suffix.lower()
+    suffix = input_suffix(path)
     if suffix == ".npz":
         return load_npz(path)
     if suffix == ".csv":

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +15,8 @@ from spotlab.drivers import available_families, load_driver
 
 BY_ID = Path("/dev/serial/by-id")
 SPOTLAB_LINKS = Path("/dev/spotlab")
+#: Folders where running ``spotlab sim --pty`` simulators keep their port links.
+SIM_LINK_GLOB = "spotlab-sim-*"
 
 
 def add_parser(sub: Any) -> None:
@@ -61,11 +65,45 @@ def list_serial_ports() -> list[dict[str, Any]]:
     return ports
 
 
+def simulator_ports() -> list[dict[str, Any]]:
+    """Ports of running ``spotlab sim --pty`` simulators: the links they keep under
+    ``TMPDIR/spotlab-sim-*/NAME``, while the pseudo-terminal they point at exists."""
+    ports = []
+    for link in sorted(Path(tempfile.gettempdir()).glob(f"{SIM_LINK_GLOB}/*")):
+        try:
+            target = link.resolve(strict=True)
+        except (OSError, RuntimeError):
+            continue  # a simulator that stopped, or a link being replaced
+        if not link.is_symlink() or not str(target).startswith("/dev/"):
+            continue
+        ports.append(
+            {
+                "device": str(link),
+                "links": [str(target)],
+                "vid": None,
+                "pid": None,
+                "serial_number": None,
+                "description": f"spotlab simulator ({link.name}, pseudo-terminal)",
+            }
+        )
+    return ports
+
+
+def _probe_ports(simulators: list[dict[str, Any]]) -> list[str]:
+    """Serial ports with hardware behind them, then the simulators' links."""
+    hardware = [p.device for p in list_ports.comports() if p.hwid and p.hwid != "n/a"]
+    return hardware + [p["device"] for p in simulators]
+
+
 def run(args: argparse.Namespace) -> int:
-    result: dict[str, Any] = {"serial_ports": list_serial_ports(), "devices": []}
+    simulators = simulator_ports()
+    result: dict[str, Any] = {"serial_ports": list_serial_ports() + simulators, "devices": []}
     if args.probe:
+        ports = _probe_ports(simulators)
         for family in available_families():
-            for dev in load_driver(family).detect():
+            detect = load_driver(family).detect
+            found = detect(ports) if "ports" in inspect.signature(detect).parameters else detect()
+            for dev in found:
                 result["devices"].append(
                     {
                         "family": dev.family,

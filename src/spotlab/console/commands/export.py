@@ -23,10 +23,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
 from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
 from spotlab.console.paths import check_output_paths
-from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
+from spotlab.console.session_times import (
+    calibration_for,
+    parse_wiring,
+    recording_timebase,
+    write_timestamps,
+)
 from spotlab.console.synchronised_export import reconstruct_recording
 from spotlab.console.trajectories import (
     check_outputs,
@@ -48,7 +54,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("file", type=Path, help="RECORDING.spj, TRIAL.c3d or TRIAL.trc")
     p.add_argument("--c3d", type=Path, metavar="OUT", help="write marker trajectories as C3D")
     p.add_argument("--trc", type=Path, metavar="OUT", help="write marker trajectories as TRC")
-    p.add_argument("--calibration", type=Path, help="rig (TOML) to reconstruct a recording")
+    p.add_argument(
+        "--calibration",
+        type=Path,
+        help="rig (TOML) to reconstruct a recording (default for a recording made with "
+        "--lab: the lab file's rig)",
+    )
     p.add_argument(
         "--drop-group",
         action="append",
@@ -131,7 +142,7 @@ def _outputs(args: argparse.Namespace) -> list[Path]:
 def _session_times(args: argparse.Namespace) -> dict[str, Any]:
     """--timestamps / --sync-report: the recording's time base; notes go to stderr."""
     path: Path = args.file
-    if path.suffix.lower() != ".spj":
+    if input_suffix(path) != ".spj":
         raise CommandError(f"{path}: --timestamps and --sync-report need a recording (.spj)")
     timebase = recording_timebase(path, parse_wiring(args.wiring))
     report = timebase.report()
@@ -153,7 +164,7 @@ def _session_times(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     outputs = _outputs(args)
     path: Path = args.file
-    suffix = path.suffix.lower()
+    suffix = input_suffix(path)
     if not path.is_file():
         raise CommandError(f"{path}: no such file")
     if args.timestamps is not None or args.sync_report is not None:
@@ -174,11 +185,12 @@ def run(args: argparse.Namespace) -> int:
             "rate_hz": trial.point_rate,
         }
     elif suffix in OBSERVATION_SUFFIXES:
-        if args.calibration is None:
+        if args.calibration is None and suffix != ".spj":
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")
         if suffix == ".spj":
             result = reconstruct_recording(
-                path, args.calibration, sync=args.sync, wiring=parse_wiring(args.wiring),
+                path, calibration_for(path, args.calibration), sync=args.sync,
+                wiring=parse_wiring(args.wiring),
                 rate_hz=args.rate, slot_correction=not args.no_slot_correction,
             )  # fmt: skip
         else:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.console.paths import check_output_paths
+from spotlab.console.session_times import calibration_for
 from spotlab.console.trajectories import (
     check_outputs,
     print_summary,
@@ -32,7 +33,11 @@ def add_parser(sub: Any) -> None:
         "and named by a marker model (--model, or the one stored in the recording).",
     )
     p.add_argument("input", type=Path, help="observations: OBS.npz, OBS.csv or RECORDING.spj")
-    p.add_argument("--calibration", type=Path, required=True, help="rig (TOML)")
+    p.add_argument(
+        "--calibration",
+        type=Path,
+        help="rig (TOML); default for a recording made with --lab: the lab file's rig",
+    )
     p.add_argument("--out", type=Path, required=True, help="trajectories to write (.c3d, .trc)")
     p.add_argument("--method", choices=METHODS, default="odle", help="estimator (default odle)")
     p.add_argument("--rate", type=float, help="frame rate in Hz (needed for CSV input)")
@@ -51,9 +56,12 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     check_output_paths([("--out", args.out)])
     check_outputs([args.out])
+    calibration = args.calibration
+    if calibration is None:
+        calibration = calibration_for(args.input, None)
     result = reconstruct_file(
         args.input,
-        args.calibration,
+        calibration,
         method=args.method,
         rate_hz=args.rate,
         labels=args.labels,

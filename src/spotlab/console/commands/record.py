@@ -3,22 +3,33 @@
 from __future__ import annotations
 
 import argparse
-import inspect
 import json
+import signal
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
+from spotlab.acquisition.summary import summarize
 from spotlab.console.blob_trajectories import MODEL_KEY, model_metadata
+from spotlab.console.decoding import decoder_for
+from spotlab.console.device_settings import (
+    FAMILY_SETTINGS,
+    GLOBAL_OPTIONS,
+    DeviceRequest,
+    device_options,
+    requests_from_lab,
+    requests_from_options,
+)
 from spotlab.console.errors import CommandError
 from spotlab.console.paths import check_output_paths
 from spotlab.console.progress import Progress
+from spotlab.console.session_times import WIRING_KEY, parse_wiring
 from spotlab.core.wire import LinkEventKind
 from spotlab.drivers import Driver, available_families, load_driver
-
-# Command-line flag -> driver keyword argument.
-DEVICE_OPTIONS = {"cameras": "cameras", "leds": "leds", "rate": "rate_hz", "baud": "baud"}
+from spotlab.io.lab_file import Lab, load_lab
 
 
 def add_parser(sub: Any) -> None:
@@ -27,7 +38,9 @@ def add_parser(sub: Any) -> None:
         help="record devices into a journal (raw wire bytes, crash-safe)",
         description="Record the raw bytes of one or several devices, with arrival stamps and "
         "metadata, into an append-only journal that survives a kill at any moment. PORT is a "
-        "device path or a pyserial URL (socket://, sim://selspot?...).",
+        "device path or a pyserial URL (socket://, sim://selspot?...). A setting a device is "
+        "not given keeps what the device reports it has. Without --seconds the recording "
+        "runs until Ctrl-C or SIGTERM.",
     )
     p.add_argument("port", nargs="?", help="device path or URL (with --driver)")
     p.add_argument("--driver", help=f"device family of PORT ({', '.join(available_families())})")
@@ -35,86 +48,104 @@ def add_parser(sub: Any) -> None:
         "--device",
         action="append",
         default=[],
-        metavar="FAMILY=PORT",
-        help="a device to record; repeat for several devices",
+        metavar="FAMILY=PORT[,key=value...]",
+        help="a device to record, with its own settings (selspot: rate, cameras, leds, slot, "
+        "bgnd, agc, baud; timer: rate, slots, baud; centroid: rate, cameras, exposure, "
+        "threshold, blobs, baud; any: name); repeat for several devices",
     )
-    p.add_argument("--seconds", type=float, required=True, help="how long to record")
+    p.add_argument(
+        "--lab",
+        type=Path,
+        metavar="LAB.toml",
+        help="lab file: devices and settings, timer wiring, rig and model (docs/lab.md)",
+    )
+    p.add_argument(
+        "--seconds", type=float, help="how long to record (default: until Ctrl-C or SIGTERM)"
+    )
     p.add_argument("--out", type=Path, required=True, help="journal file to write (.spj)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
-    p.add_argument("--cameras", type=int, help="cameras to configure")
-    p.add_argument("--leds", type=int, help="LEDs (markers) to configure")
-    p.add_argument("--rate", type=float, help="frame rate in Hz")
-    p.add_argument("--baud", help="line rate after negotiation, or 'auto'")
+    p.add_argument("--cameras", type=int, help="cameras, for devices that do not say")
+    p.add_argument("--leds", type=int, help="LEDs (markers), for devices that do not say")
+    p.add_argument("--rate", type=float, help="frame rate in Hz, for devices that do not say")
+    p.add_argument(
+        "--baud", help="line rate after negotiation, or 'auto', for devices that do not say"
+    )
+    p.add_argument(
+        "--wiring",
+        action="append",
+        default=[],
+        metavar="STREAM=INPUT",
+        help="timer input that captures STREAM's frame pulses, kept in the recording for "
+        "spotlab export (adds to the lab file's [wiring]); repeat",
+    )
     p.add_argument(
         "--model",
         type=Path,
         metavar="MODEL.json",
         help="marker model (names, rigid clusters) of the subject, kept in the recording for "
-        "spotlab reconstruct of video-centroid recordings",
+        "spotlab reconstruct of video-centroid recordings (default: the lab file's)",
     )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(run=run)
 
 
-def _device_list(args: argparse.Namespace) -> list[tuple[str, str]]:
-    pairs: list[tuple[str, str]] = []
+def _defaults(args: argparse.Namespace) -> dict[str, Any]:
+    """The global options given, as settings for devices that do not say."""
+    out: dict[str, Any] = {}
+    for key in GLOBAL_OPTIONS:
+        value = getattr(args, key)
+        if value is not None:
+            out[key] = value
+    return out
+
+
+def _requests(args: argparse.Namespace, lab: Lab | None) -> list[DeviceRequest]:
+    defaults = _defaults(args)
+    requests: list[DeviceRequest] = []
+    if lab is not None:
+        requests += requests_from_lab(lab.devices, defaults)
     if args.port:
         if not args.driver:
             raise CommandError("give --driver FAMILY with PORT (or use --device FAMILY=PORT)")
-        pairs.append((args.driver, args.port))
+        name, options = device_options(args.driver, {}, f"--driver {args.driver}", defaults)
+        requests.append(DeviceRequest(args.driver, args.port, name, options))
     elif args.driver:
         raise CommandError("--driver needs a PORT")
-    for item in args.device:
-        family, sep, port = item.partition("=")
-        if not sep or not family or not port:
-            raise CommandError(f"--device takes FAMILY=PORT, got {item!r}")
-        pairs.append((family, port))
-    if not pairs:
-        raise CommandError("nothing to record: give PORT --driver FAMILY or --device FAMILY=PORT")
-    return pairs
+    requests += requests_from_options(args.device, defaults)
+    if not requests:
+        raise CommandError(
+            "nothing to record: give PORT --driver FAMILY, --device FAMILY=PORT or --lab LAB.toml"
+        )
+    families = {r.family for r in requests}
+    for key, value in defaults.items():
+        if not any(key in FAMILY_SETTINGS.get(f, {}) for f in families):
+            raise CommandError(
+                f"--{key} {value} does not apply to {', '.join(sorted(families))} devices"
+            )
+    return requests
 
 
-def _driver_options(
-    args: argparse.Namespace, cls: type[Driver], mixed: bool = False
-) -> dict[str, Any]:
-    """Keyword arguments of ``cls`` from the flags; with ``mixed`` families, flags that do
-    not apply to this one (``--cameras`` for a timer) are left to the others."""
-    accepted = inspect.signature(cls.__init__).parameters
-    options: dict[str, Any] = {}
-    for flag, keyword in DEVICE_OPTIONS.items():
-        value = getattr(args, flag)
-        if value is None:
-            continue
-        if keyword not in accepted:
-            if mixed:
-                continue
-            raise CommandError(f"--{flag} does not apply to {cls.family} devices")
-        if keyword == "baud" and value != "auto":
-            try:
-                value = int(value)
-            except ValueError:
-                raise CommandError(f"--baud takes a number or 'auto', got {value!r}") from None
-        options[keyword] = value
-    return options
-
-
-def build_drivers(args: argparse.Namespace) -> list[Driver]:
-    """Driver objects for every device named on the command line (not yet started)."""
-    pairs = _device_list(args)
+def build_drivers(args: argparse.Namespace, lab: Lab | None = None) -> list[Driver]:
+    """Driver objects for every device named on the command line or in the lab file
+    (not yet started)."""
+    requests = _requests(args, lab)
     drivers: list[Driver] = []
     counts: dict[str, int] = {}
-    mixed = len({family for family, _ in pairs}) > 1
-    for family, port in pairs:
-        cls = load_driver(family)
-        n = counts.get(family, 0)
-        counts[family] = n + 1
-        name = family if n == 0 else f"{family}{n}"
-        drivers.append(cls(port, name=name, **_driver_options(args, cls, mixed)))
-    if len(pairs) > 1:
+    for r in requests:
+        cls = load_driver(r.family)
+        n = counts.get(r.family, 0)
+        counts[r.family] = n + 1
+        name = r.name or (r.family if n == 0 else f"{r.family}{n}")
+        drivers.append(cls(r.port, name=name, **r.options))
+    if len(requests) > 1:
         # Name every stream by family and index when a family appears more than once.
         for d in drivers:
             if counts[d.family] > 1 and d.name == d.family:
                 d.name = f"{d.family}0"
+    names = [d.name for d in drivers]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise CommandError(f"stream name {twice[0]!r} is given to several devices")
     return drivers
 
 
@@ -139,16 +170,65 @@ class OutageWatch:
             self.away.pop(stream, None)
 
 
+@contextmanager
+def _stop_on_signals(session: Session) -> Iterator[list[int]]:
+    """While recording, SIGINT (Ctrl-C) and SIGTERM end it as a deliberate stop; yields
+    the list of signals received."""
+    received: list[int] = []
+
+    def handler(signum: int, frame: object) -> None:
+        received.append(signum)
+        session.request_stop()
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield received
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _session_metadata(args: argparse.Namespace, lab: Lab | None) -> dict[str, Any]:
+    meta: dict[str, Any] = {"command": "record"}
+    wiring = dict(lab.wiring) if lab is not None else {}
+    wiring.update(parse_wiring(args.wiring))
+    if wiring:
+        meta[WIRING_KEY] = wiring
+    model = args.model if args.model is not None else (lab.model if lab else None)
+    if model is not None:
+        meta[MODEL_KEY] = model_metadata(model)
+    if lab is not None:
+        meta["lab"] = {
+            "path": str(lab.path),
+            "rig": None if lab.rig is None else str(lab.rig),
+            "model": None if lab.model is None else str(lab.model),
+        }
+    return meta
+
+
+def _summary_lines(result: dict[str, Any]) -> list[str]:
+    lines = []
+    for s in result["streams"]:
+        if s.get("undecodable"):
+            lines.append(f"{s['name']}: not decoded: {s['undecodable']} -> {result['out']}")
+            continue
+        lines.append(
+            f"{s['name']}: {s['frames']} frames, lost {s['lost_frames']}, "
+            f"CRC errors {s['crc_errors']}, resyncs {s['resyncs']}, "
+            f"reconnects {s['reconnects']} -> {result['out']}"
+        )
+    return lines
+
+
 def run(args: argparse.Namespace) -> int:
-    if not args.seconds > 0:
+    if args.seconds is not None and not args.seconds > 0:
         raise CommandError(f"--seconds must be positive, got {args.seconds}")
     check_output_paths([("--out", args.out)])
     if args.out.exists() and not args.overwrite:
         raise CommandError(f"{args.out} exists; choose another --out or add --overwrite")
-    drivers = build_drivers(args)
-    session_meta: dict[str, Any] = {"command": "record"}
-    if args.model is not None:
-        session_meta[MODEL_KEY] = model_metadata(args.model)
+    lab = load_lab(args.lab) if args.lab is not None else None
+    drivers = build_drivers(args, lab)
+    session_meta = _session_metadata(args, lab)
     recorder = Recorder(args.out, session_meta, overwrite=args.overwrite)
     progress = Progress("recording", total=args.seconds)
 
@@ -159,8 +239,10 @@ def run(args: argparse.Namespace) -> int:
     for driver in drivers:
         driver.add_tap(watch)
     session = Session(drivers, [recorder], close_devices=True)
+    seconds = float("inf") if args.seconds is None else args.seconds
     try:
-        status = session.run_for(args.seconds, progress=show)
+        with _stop_on_signals(session) as received:
+            status = session.run_for(seconds, progress=show)
     except BaseException:
         if not any(session.frames.values()):
             # Nothing but a failed start-up dialogue: leave no file that blocks a retry.
@@ -168,26 +250,26 @@ def run(args: argparse.Namespace) -> int:
         raise
     finally:
         progress.close()
+    # The figures are those of the written file, decoded as `spotlab info` decodes it.
+    recorded = summarize(args.out, decoder_for).to_dict()
+    live = {d.name: {"family": d.family, "port": d.port, **d.stats.as_dict()} for d in drivers}
     result: dict[str, Any] = {
         "out": str(args.out),
         "seconds": round(status.elapsed_s, 3),
+        "stopped_by": [signal.Signals(s).name for s in received],
         "streams": [
-            {"name": d.name, "family": d.family, "port": d.port, **d.stats.as_dict()}
-            for d in drivers
+            {**s, "port": live.get(s["name"], {}).get("port")} for s in recorded["streams"]
         ],
+        "live": live,
         "overflows": status.overflows,
         "errors": [str(e) for e in session.errors],
+        "away_at_end": dict(watch.away),
     }
-    result["away_at_end"] = dict(watch.away)
     if args.json:
         print(json.dumps(result))
     else:
-        for s in result["streams"]:
-            print(
-                f"{s['name']}: {s['frames']} frames, lost {s['lost_frames']}, "
-                f"CRC errors {s['crc_errors']}, resyncs {s['resyncs']}, "
-                f"reconnects {s['reconnects']} -> {args.out}"
-            )
+        for line in _summary_lines(result):
+            print(line)
     if watch.away:
         lost = ", ".join(f"{name} ({why})" for name, why in watch.away.items())
         raise CommandError(
