@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test lint typecheck layers unit bench bench-gcvspline fuzz clean
+.PHONY: demo test lint typecheck layers unit long bench bench-gcvspline fuzz clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "spotlab needs Python 3.11 or newer"'
@@ -29,7 +29,11 @@ layers: $(STAMP)
 	LINT_IMPORTS=$(CURDIR)/$(BIN)/lint-imports tools/lint_layers.sh
 
 unit: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -m "not long"
+
+# The 30-60 s versions of end-to-end runs (make test runs them at 8-10 s).
+long: $(STAMP)
+	$(BIN)/python -m pytest -m long
 
 test: lint typecheck layers unit
 

@@ -120,7 +120,7 @@ def test_two_systems_at_200_and_150_hz_and_a_timer_at_100_hz_8s(tmp_path: Path) 
     _check_every_frame_on_time(run_multi_rate(tmp_path, 8.0), tmp_path, 8.0)
 
 
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.timeout(180)
 def test_two_systems_at_200_and_150_hz_and_a_timer_at_100_hz_30s(tmp_path: Path) -> None:
     _check_every_frame_on_time(run_multi_rate(tmp_path, 30.0), tmp_path, 30.0)

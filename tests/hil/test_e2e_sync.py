@@ -195,7 +195,7 @@ def test_two_systems_and_timer_10s_within_50us_and_step_reported(tmp_path: Path)
     check_lab(lab, tmp_path, seconds)
 
 
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.timeout(200)
 def test_two_systems_and_timer_60s_within_50us_and_step_reported(tmp_path: Path) -> None:
     seconds = 60.0
