@@ -6,6 +6,7 @@ import threading
 from collections import deque
 from dataclasses import dataclass
 
+from spotlab.core.failures import FailureTally
 from spotlab.core.frames import FrameBlock
 
 
@@ -26,7 +27,10 @@ class SinkStats:
     errors_delivered : int
         Device errors handed to ``on_error`` (never dropped).
     sink_errors : int
-        Exceptions the sink itself raised (logged, delivery went on).
+        Exceptions the sink itself raised (delivery went on).
+    sink_failures : dict of str to int
+        Those exceptions by kind (type and place: :func:`spotlab.core.failures.failure_kind`);
+        the first of each kind is logged with its traceback.
     peak_queue : int
         Most blocks ever waiting at once.
     """
@@ -38,6 +42,7 @@ class SinkStats:
     errors_delivered: int
     sink_errors: int
     peak_queue: int
+    sink_failures: dict[str, int]
 
 
 class SinkChannel:
@@ -62,7 +67,7 @@ class SinkChannel:
         self.overflows = 0
         self.dropped_frames = 0
         self.errors_delivered = 0
-        self.sink_errors = 0
+        self.failures = FailureTally()
         self.peak_queue = 0
 
     def put_block(self, stream: str, block: FrameBlock) -> bool:
@@ -111,6 +116,7 @@ class SinkChannel:
                 self.overflows,
                 self.dropped_frames,
                 self.errors_delivered,
-                self.sink_errors,
+                self.failures.total,
                 self.peak_queue,
+                self.failures.snapshot(),
             )

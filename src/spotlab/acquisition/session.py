@@ -430,11 +430,8 @@ class Session:
         """Deliver to an inline sink in the reader's thread; its exceptions are counted."""
         try:
             call(stream, payload)
-        except Exception:
-            with lock:
-                channel.sink_errors += 1
-                n = channel.sink_errors
-            if n <= 3:
+        except Exception as exc:
+            if channel.failures.add(exc):  # the first of its kind: counted all the same
                 log.exception("inline sink %s failed on a %s item", channel.name, stream)
         with lock:
             if error:
@@ -459,9 +456,8 @@ class Session:
                 else:
                     channel.delivered += 1
                     sink.on_block(stream, payload)
-            except Exception:
-                channel.sink_errors += 1
-                if channel.sink_errors <= 3:
+            except Exception as exc:
+                if channel.failures.add(exc):  # the first of its kind: counted all the same
                     log.exception("sink %s failed on a %s item", channel.name, stream)
 
     def _shutdown(self, *, raise_errors: bool) -> None:

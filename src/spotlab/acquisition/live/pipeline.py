@@ -30,6 +30,7 @@ from spotlab.acquisition.live.readings import pixels
 from spotlab.acquisition.live.results import LiveFrame
 from spotlab.acquisition.synchroniser import sample_offsets
 from spotlab.core.errors import ConfigurationError, SpotlabError
+from spotlab.core.failures import FailureTally
 from spotlab.core.streams import StreamSpec
 from spotlab.geometry import Rig
 from spotlab.reconstruction.frame_triangulator import FrameTriangulator
@@ -60,11 +61,14 @@ class LiveStats:
     unclocked : int
         Frames dropped because their stream's clock had no model yet.
     failed : int
-        Frames whose triangulation raised (logged).
+        Frames whose triangulation raised.
     late : int
         Frames older than their stream's previous one (not matched).
     consumer_errors : int
-        Exceptions raised by consumers (logged; the other consumers still ran).
+        Exceptions raised by consumers (the other consumers still ran).
+    failures : dict of str to int
+        Both kinds of failure by kind (type and place,
+        :func:`spotlab.core.failures.failure_kind`); the first of each kind is logged.
     latency : LatencySummary
         Host latency of every output frame.
     latency_by_stream : dict of str to LatencySummary
@@ -80,6 +84,7 @@ class LiveStats:
     consumer_errors: int
     latency: LatencySummary
     latency_by_stream: dict[str, LatencySummary]
+    failures: dict[str, int]
 
 
 class _Stream:
@@ -196,6 +201,7 @@ class LivePipeline(SinkBase):
         self.latency = LatencyStats()
         self._index = 0
         self._unclocked = self._failed = self._consumer_errors = 0
+        self._failures = FailureTally()
 
     # -- set-up ---------------------------------------------------------------
     def on_start(self, devices: Sequence[Device]) -> None:
@@ -309,7 +315,7 @@ class LivePipeline(SinkBase):
             X, rms, n_views = self._triangulate(uv)
         except SpotlabError as exc:
             self._failed += 1
-            if self._failed <= 3:
+            if self._failures.add(exc):  # the first of its kind: counted all the same
                 log.error("live pipeline: frame %d not triangulated: %s", self._index, exc)
             return
         ref = members[0]  # the first stream present gives the frame's times
@@ -331,9 +337,9 @@ class LivePipeline(SinkBase):
         for consumer in self.consumers:
             try:
                 consumer(frame)
-            except Exception:
+            except Exception as exc:
                 self._consumer_errors += 1
-                if self._consumer_errors <= 3:
+                if self._failures.add(exc):  # the first of its kind: counted all the same
                     log.exception("live pipeline: consumer %r failed", consumer)
 
     # -- figures ------------------------------------------------------------------
@@ -358,4 +364,5 @@ class LivePipeline(SinkBase):
             consumer_errors=self._consumer_errors,
             latency=self.latency.summary(),
             latency_by_stream={s.spec.name: s.latency.summary() for s in streams},
+            failures=self._failures.snapshot(),
         )
