@@ -31,7 +31,8 @@ from spotlab.calibration import wand_calibrate
 from spotlab.geometry import Camera, Rig
 from spotlab.reconstruction import triangulate
 from spotlab.simulators.rigs import ring_rig
-from spotlab.simulators.wand_dance import WandDance, score_rig, wand_dance
+from spotlab.simulators.wand_dance import WandDance, wand_dance
+from spotlab.testing.rig_score import score_rig
 
 
 def _ratios(ours: dict[str, float], floor: dict[str, float]) -> dict[str, float]:

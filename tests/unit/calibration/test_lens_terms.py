@@ -13,7 +13,8 @@ from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Camera
 from spotlab.geometry.lens_check import lens_problems
 from spotlab.simulators.rigs import ring_rig
-from spotlab.simulators.wand_dance import WandDance, score_rig, wand_dance
+from spotlab.simulators.wand_dance import WandDance, wand_dance
+from spotlab.testing.rig_score import score_rig
 
 
 def _small_volume() -> WandDance:

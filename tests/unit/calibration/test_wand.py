@@ -11,7 +11,8 @@ from spotlab.calibration import wand_calibrate, write_report_figure
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Camera, Rig
 from spotlab.simulators.rigs import look_at, ring_rig
-from spotlab.simulators.wand_dance import WandDance, score_rig, wand_dance
+from spotlab.simulators.wand_dance import WandDance, wand_dance
+from spotlab.testing.rig_score import score_rig
 
 
 def _scene(seed: int = 0, noise: float = 0.2, cameras: int = 4, frames: int = 600, **kw):

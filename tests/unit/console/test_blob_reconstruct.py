@@ -29,8 +29,8 @@ from spotlab.geometry import Rig
 from spotlab.io import read_c3d, read_trc
 from spotlab.io.journal import JournalReader
 from spotlab.reconstruction.identification import MarkerModel
-from spotlab.simulators.centroid_model import body_marker_model, write_body_model
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
+from spotlab.testing.centroid_model import body_marker_model, write_body_model
 from spotlab.testing.centroid_scene import centroid_scene
 
 RATE_HZ, SECONDS = 300, 0.7

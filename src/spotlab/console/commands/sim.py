@@ -13,7 +13,6 @@ from spotlab.console.errors import CommandError
 from spotlab.console.paths import check_output_dir, check_output_paths
 from spotlab.io import FileFormatError
 from spotlab.simulators import service
-from spotlab.simulators.centroid_model import write_body_model
 from spotlab.simulators.centroid_service import (
     CENTROID_MOTIONS,
     LFRAME_MARKERS,
@@ -23,6 +22,7 @@ from spotlab.simulators.centroid_service import (
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import lab_dir
 from spotlab.simulators.motions import MOTIONS, from_c3d, make_motion, static_points
+from spotlab.testing.centroid_model import write_body_model
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer

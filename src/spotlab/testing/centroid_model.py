@@ -1,4 +1,5 @@
-"""The marker model of a simulated CEN hub's markers (``spotlab sim centroid --model-out``).
+"""The marker model of a simulated CEN hub's markers (``spotlab sim centroid --model-out``), learnt
+from the simulator's truth: a shortcut for tests, kept in spotlab.testing with the scoring.
 
 A real hub does not know its markers' names: they come from a subject template, a
 :class:`~spotlab.reconstruction.identification.MarkerModel` (names, rigid clusters,
