@@ -16,6 +16,7 @@ from spotlab.drivers.mcs1.commands import (
     DeviceConfigurationError,
     check_line,
     encode_command,
+    parse_conf,
     parse_reply,
 )
 from spotlab.drivers.mcs1.session import find_reply
@@ -50,6 +51,7 @@ def test_golden_commands_hex(verb: str, args: str, wire: str) -> None:
         ("RATE", "200000", b"RATE:2000008EC6\r"),
         ("START", "", b"START:51B4\r"),
         ("STOP", "", b"STOP:FD1C\r"),
+        ("CONF", "", b"CONF:621B\r"),
         ("CAMS", "2", b"CAMS:2BD12\r"),
         ("LEDT", "008005C01140", b"LEDT:008005C01140E8FF\r"),
         ("SLOT", "100", b"SLOT:1000B9E\r"),
@@ -174,3 +176,13 @@ def test_find_reply_behind_garbage() -> None:
     assert find_reply(b"\x00\xff" + line("SPX 1.0 S 4 128")) == line("SPX 1.0 S 4 128")
     assert find_reply(b"AT\r") is None
     assert find_reply(b"") is None
+
+
+def test_conf_reply_golden_vector() -> None:
+    """docs/protocols/mcs1.md §6: the reply to ``CONF:`` and its fields."""
+    golden = bytes.fromhex(
+        "43 4F 4E 46 20 52 41 54 45 3D 32 30 30 30 30 30 20 43 41 4D 53 3D 32 38 31 32 36 0D"
+    )
+    reply = parse_reply(golden, data_prefix="CONF")
+    assert reply.kind == "data" and reply.text == "CONF RATE=200000 CAMS=2"
+    assert parse_conf(reply.text) == {"RATE": "200000", "CAMS": "2"}

@@ -49,6 +49,7 @@ def test_golden_time_and_version_replies() -> None:
         ("RATE:200000", b"RATE:2000008EC6\r"),
         ("START:", b"START:51B4\r"),
         ("STOP:", b"STOP:FD1C\r"),
+        ("CONF:", b"CONF:621B\r"),
         ("CAMS:2", b"CAMS:2BD12\r"),
         ("LEDT:008005C01140", b"LEDT:008005C01140E8FF\r"),
         ("SLOT:100", b"SLOT:1000B9E\r"),
@@ -116,3 +117,10 @@ def test_encoder_wraps_counters_and_sets_header_flags() -> None:
 def test_payload_limit_is_enforced() -> None:
     with pytest.raises(ValueError, match="4096"):
         wire.frame(wire.FRAME_SPX, 0, bytes(4097))
+
+
+def test_conf_reply_golden_vector() -> None:
+    """docs/protocols/mcs1.md §6: the simulator's reply to ``CONF:``."""
+    assert wire.reply("CONF RATE=200000 CAMS=2") == bytes.fromhex(
+        "43 4F 4E 46 20 52 41 54 45 3D 32 30 30 30 30 30 20 43 41 4D 53 3D 32 38 31 32 36 0D"
+    )
