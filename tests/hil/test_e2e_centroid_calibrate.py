@@ -165,22 +165,51 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     for cam in report["cameras"]:
         assert cam["reprojection_rms_px"] < 0.1, cam  # 0.07 px centroid noise
 
+    for cam in report["cameras"]:
+        # The L-frame's images, averaged over its recording, are far less noisy than the
+        # wand's (measured 0.001-0.004 px); a blob taken for a marker that is not one
+        # (a floor reflection) would leave pixels here.
+        assert cam["frame_rms_px"] < 0.05, cam
+
     # The end: held-out body markers, triangulated with both rigs, against the truth.
     uv, X = _walk_views(lab)
     rigs = {"calibrated": Rig.load(out), "true": Rig.load(lab.true_rig)}
     assert [c.name for c in rigs["calibrated"]] == [c.name for c in rigs["true"]]
-    err = {k: np.linalg.norm(triangulate(rig, uv) - X, axis=-1) for k, rig in rigs.items()}
-    both = np.isfinite(err["calibrated"]) & np.isfinite(err["true"])
-    rms = {k: float(np.sqrt(np.mean(e[both] ** 2))) for k, e in err.items()}
-    ratio = rms["calibrated"] / rms["true"]
-    print(f"{both.sum()} body marker-frames: RMS {rms} mm, ratio {ratio:.4f}")
+    P = {k: triangulate(rig, uv) for k, rig in rigs.items()}
+    both = np.isfinite(P["calibrated"]).all(-1) & np.isfinite(P["true"]).all(-1)
     assert both.sum() > 1000
-    # The target is 5 % (docs/calibration.md). Measured through this test: 1.008, 1.009,
-    # 1.015, 1.042; the same wand dance with other L-frame recordings 1.017-1.052. The
-    # L-frame (600 x 400 mm) places the world frame: with 0.002-0.004 px of noise left in
-    # its averaged images the body came out turned by 1.7-2.8e-5 rad and shifted by
-    # 0.03-0.05 mm against the true rig's 0.21 mm error. The bound leaves room for that.
-    assert ratio < 1.08
+    # Two things are judged apart. The rig's own geometry: the calibrated points after
+    # the one rigid motion that best lays them on the truth, against the true rig's
+    # error. And where the L-frame put the world: that rigid motion itself.
+    R, t = _rigid_fit(P["calibrated"][both], X[both])
+    err = {
+        "raw": np.linalg.norm(P["calibrated"][both] - X[both], axis=-1),
+        "calibrated": np.linalg.norm(P["calibrated"][both] @ R.T + t - X[both], axis=-1),
+        "true": np.linalg.norm(P["true"][both] - X[both], axis=-1),
+    }
+    rms = {k: float(np.sqrt(np.mean(e**2))) for k, e in err.items()}
+    ratio = rms["calibrated"] / rms["true"]
+    angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
+    centre = X[both].mean(axis=0)
+    shift = float(np.linalg.norm(centre @ R.T + t - centre))
+    print(f"{both.sum()} body marker-frames: RMS {rms} mm, ratio {ratio:.4f}; world frame "
+          f"turned {angle:.2e} rad, shifted {shift:.3f} mm at the markers' centre")  # fmt: skip
+    # The target is 5 % (docs/calibration.md). Measured on 15 s windows of one 40 s wand
+    # dance with one L-frame recording (the window a recording catches depends on when it
+    # starts): ratio 1.001-1.013 after the rigid motion, turned 1.0-2.9e-5 rad, shifted
+    # 0.013-0.066 mm (the true rig's own error is 0.2 mm); the raw ratio, both together,
+    # 1.009-1.065, and 1.13 once in CI.
+    assert ratio < 1.05
+    assert angle < 1e-4 and shift < 0.15
+
+
+def _rigid_fit(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rotation R and translation t minimising |A R^T + t - B| (points (N, 3), mm)."""
+    ma, mb = A.mean(axis=0), B.mean(axis=0)
+    U, _, Vt = np.linalg.svd((A - ma).T @ (B - mb))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = (U @ D @ Vt).T
+    return R, mb - ma @ R.T
 
 
 @pytest.mark.timeout(180)

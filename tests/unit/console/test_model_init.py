@@ -69,7 +69,7 @@ def test_init_then_learn(folder: Path, tmp_path: Path, capsys: pytest.CaptureFix
         input=folder / "rom.spj", model=m0, calibration=folder / "rig.toml", out=final
     )
     assert run_learn_recording(args) == 0
-    assert "first frame: the static pose fits" in capsys.readouterr().out
+    assert "static pose: fits frame " in capsys.readouterr().out
     model = MarkerModel.load(final)
     assert model.labels == MarkerModel.load(m0).labels and len(model.segments) == 1
     # scored only now: the static labels against the truth of the static trial

@@ -164,7 +164,7 @@ def run_learn_recording(args: argparse.Namespace) -> int:
     final.save(args.out)
     seen = np.isfinite(X[..., 0]).mean(axis=0)
     if fit is not None:
-        print(f"first frame: the static pose fits with RMS {fit.rms_mm:.1f} mm")
+        print(f"static pose: fits frame {fit.frame} best, RMS {fit.rms_mm:.1f} mm")
     print(
         f"{args.input}: {X.shape[0]} frames, {seen.mean():.1%} of the marker-frames labelled "
         "with M0; least labelled: "

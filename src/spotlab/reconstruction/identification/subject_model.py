@@ -15,6 +15,7 @@ labels do not widen it), widened by ``margin_mm``.
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,16 @@ TRIM_PERCENT = 0.5
 LINK_SPREAD_MM = 60.0
 #: Frames a link must be seen in, in the ROM trial, for its range to be learnt.
 MIN_LINK_FRAMES = 20
+#: A ROM trial's static pose is looked for in its first frames, every few frames.
+START_SEARCH_FRAMES = 300
+START_SEARCH_STEP = 5
+#: A searched frame fitting the static pose within this RMS (mm) ends the search.
+START_GOOD_RMS_MM = 5.0
+#: Largest RMS (mm) of the subject's own static pose fitted to a frame: its markers sit
+#: where the static trial saw them, give or take sway and soft tissue, far closer than a
+#: generic template's (an accepted fit 25 mm off had swapped the foot's markers; frames
+#: in the pose fit within 3-5 mm).
+SUBJECT_MAX_RMS_MM = 10.0
 
 
 def static_pose(points: Any, fit: TemplateFit, template: Template) -> FloatArray:
@@ -93,6 +104,7 @@ def subject_template(
     return Template(
         f"{template.name} (subject)", model.labels, body, segments, model.links,
         f"static pose fitted to template {template.name!r}",
+        max_rms_mm=SUBJECT_MAX_RMS_MM,
     )  # fmt: skip
 
 
@@ -101,6 +113,9 @@ def label_trial(
     frames: Iterable[tuple[BlobFrame, Any]],
     model: MarkerModel,
     start: Template | None = None,
+    *,
+    search_frames: int = START_SEARCH_FRAMES,
+    search_step: int = START_SEARCH_STEP,
     **identifier_options: Any,
 ) -> tuple[FloatArray, TemplateFit | None]:
     """Label a trial with ``model``: a ROM trial, to learn the final model from.
@@ -112,10 +127,16 @@ def label_trial(
         Each frame's blobs and its unusable cameras (or None).
     model : MarkerModel
     start : Template, optional
-        The subject's static pose (:func:`subject_template`): the trial starts in it, and
-        the first frame's points are labelled by fitting it (:func:`.fit_template`),
-        then carried by tracking; the model's links alone cannot tell apart markers close
-        together on a cold start. None: the identifier alone.
+        The subject's static pose (:func:`subject_template`). The trial holds it
+        somewhere in its first ``search_frames`` frames (the subject stands in it when the
+        recording starts, or soon after): every ``search_step``-th of those frames is
+        fitted (:func:`.fit_template`, within the template's own bounds) until one fits
+        within ``START_GOOD_RMS_MM``, the best fit's
+        points are labelled and the labels carried by tracking forward to the trial's end
+        and backward to its first frame. The model's links alone cannot tell apart
+        markers close together on a cold start. None: the identifier alone.
+    search_frames, search_step : int
+        Where the static pose is looked for, in frames.
     **identifier_options
         Passed to :class:`Identifier`.
 
@@ -124,27 +145,71 @@ def label_trial(
     positions : ndarray, shape (F, M, 3)
         Labelled positions (mm), NaN where a marker was not labelled.
     fit : TemplateFit or None
-        The fit of ``start`` to the first frame.
+        The fit of ``start`` to the frame it fitted best (``fit.frame``).
 
     Raises
     ------
     ReconstructionError
-        When the first frame does not fit ``start`` (the trial does not start in the
-        static pose).
+        When no frame searched fits ``start`` (the subject never stood in the static
+        pose there), or the trial has no frames.
     """
-    identify = Identifier(rig, model, **identifier_options)
-    out = []
-    fit = None
-    for f, (frame, unusable) in enumerate(frames):
-        result = identify(frame, unusable)
-        if f == 0 and start is not None:
-            fit = fit_template(identify.current_points(), start)
-            identify.seed_labels(fit.marker_of)
-            result = identify(frame, unusable)  # the frame again, its labels checked
-        out.append(result.points)
-    if not out:
+    todo = list(frames)
+    if not todo:
         raise ReconstructionError("the trial has no frames")
-    return np.stack(out), fit
+    if start is None:
+        identify = Identifier(rig, model, **identifier_options)
+        return np.stack([identify(*frame).points for frame in todo]), None
+    fit = _find_static_pose(rig, todo, model, start, search_frames, search_step,
+                            identifier_options)  # fmt: skip
+    out: list[FloatArray | None] = [None] * len(todo)
+    for order in (range(fit.frame, len(todo)), range(fit.frame, -1, -1)):
+        identify = Identifier(rig, model, **identifier_options)
+        for k, f in enumerate(order):
+            result = identify(*todo[f])
+            if k == 0:
+                identify.seed_labels(fit.marker_of)
+                result = identify(*todo[f])  # the frame again, its labels checked
+            out[f] = result.points
+    return np.stack([x for x in out if x is not None]), fit
+
+
+def _find_static_pose(
+    rig: Rig,
+    frames: list[tuple[BlobFrame, Any]],
+    model: MarkerModel,
+    start: Template,
+    search_frames: int,
+    search_step: int,
+    identifier_options: dict[str, Any],
+) -> TemplateFit:
+    """The best fit of the static pose ``start`` among the searched frames, with the
+    frame it came from (its points those of a cold identifier at that frame)."""
+    identify = Identifier(rig, model, **identifier_options)
+    best: tuple[float, int] | None = None
+    refusal = ""
+    step = max(1, search_step)
+    for f in range(min(len(frames), max(1, search_frames))):
+        identify(*frames[f])
+        if f % step:
+            continue
+        try:
+            rms = fit_template(identify.current_points(), start).rms_mm
+        except ReconstructionError as exc:
+            refusal = str(exc)
+            continue
+        if best is None or rms < best[0]:
+            best = (rms, f)
+        if rms <= START_GOOD_RMS_MM:
+            break
+    if best is None:
+        raise ReconstructionError(
+            f"the subject's static pose fits none of the trial's first {search_frames} "
+            f"frames (every {step}th tried; the last: {refusal}); a ROM trial starts with "
+            "the subject standing in the static pose"
+        )
+    cold = Identifier(rig, model, **identifier_options)
+    cold(*frames[best[1]])
+    return replace(fit_template(cold.current_points(), start), frame=best[1])
 
 
 def learn_model(

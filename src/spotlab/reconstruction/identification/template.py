@@ -240,6 +240,10 @@ class TemplateFit:
         RMS of the matched residuals (mm).
     matched : float
         Fraction of the template's markers matched.
+    frame : int
+        The trial frame whose points were fitted, where a trial was searched
+        (:func:`~spotlab.reconstruction.identification.subject_model.label_trial`); 0
+        otherwise.
     """
 
     marker_of: IntArray
@@ -251,6 +255,7 @@ class TemplateFit:
     residual_mm: FloatArray
     rms_mm: float
     matched: float
+    frame: int = 0
 
     def labels(self, template: Template) -> list[str | None]:
         """Label of each point (None where unmatched)."""
