@@ -44,19 +44,13 @@ class SelspotDevice(Mcs1Device[SpxConfig]):
     ----------
     scene : Scene
         What the cameras look at; its camera count is the device's maximum.
-    clock : DeviceClock, optional
-        The device's clock (default: ideal, powered up at ``now_ns``).
-    faults : FaultInjector, optional
-        Link faults to inject (default: none).
-    serial : str
-        Serial number in the ``VER:0`` reply.
     seed : int
         Seed of the detector noise and of line garbling.
     psd : PsdModel, optional
         Detector parameters.
     truth : path, optional
         Ground-truth CSV to write (see :mod:`spotlab.simulators.truth`).
-    fault_log, default_rate_hz, fifo_bytes, mark_simulated, now_ns, lab :
+    clock, faults, serial, fault_log, default_rate_hz, fifo_bytes, mark_simulated, now_ns, lab :
         As :class:`~spotlab.simulators.mcs1_device.Mcs1Device` (the spec's
         default frame rate is 100 Hz).
     """
