@@ -12,17 +12,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from spotlab.simulators import mcs1_service as mcs1
 from spotlab.simulators.blobs import BlobModel
 from spotlab.simulators.centroid import CentroidDevice, Episode
 from spotlab.simulators.centroid_poses import BODY_MOTIONS
 from spotlab.simulators.faults import FaultInjector
-from spotlab.simulators.mcs1_service import (
-    device_clock,
-    lab_publisher,
-    options_url,
-    parse_options_url,
-    serve_device_pty,
-)
 from spotlab.simulators.motions import Motion, WandDance, reference_markers
 from spotlab.simulators.rigs import ring_rig
 
@@ -197,7 +191,7 @@ def write_frame_points(path: Path) -> None:
 def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None) -> CentroidDevice:
     """A powered-up simulated CEN hub (and its rig written to ``rig_out``)."""
     options.validate()
-    clock = device_clock(options, now_ns)
+    clock = mcs1.device_clock(options, now_ns)
     # The rig does not depend on the seed: a lab's cameras stay put between trials.
     rig = ring_rig(max(options.cameras, 8))
     if options.cameras < 8:
@@ -214,7 +208,8 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
         occlusion=bool(options.occlusion), serial=options.serial, seed=options.seed,
         truth=options.truth, fault_log=options.fault_log, default_rate_hz=options.rate_hz,
         body_motion=options.motion if options.motion in BODY_MOTIONS else "walk",
-        now_ns=clock.epoch_ns, lab=lab_publisher(options, clock), motion=centroid_motion(options),
+        now_ns=clock.epoch_ns, lab=mcs1.lab_publisher(options, clock),
+        motion=centroid_motion(options),
     )  # fmt: skip
     if options.rig_out is not None:
         rig.save(options.rig_out)
@@ -225,16 +220,16 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
 
 def serve_centroid_pty(options: CentroidSimOptions) -> PtyServer:
     """Serve a simulated CEN hub on a pseudo-terminal; ``.path`` is the stable link."""
-    return serve_device_pty(lambda now_ns: build_centroid_device(options, now_ns), "centroid")
+    return mcs1.serve_device_pty(lambda now_ns: build_centroid_device(options, now_ns), "centroid")
 
 
 def centroid_url_for(options: CentroidSimOptions) -> str:
     """The ``sim://centroid?...`` URL of these options (defaults left out)."""
-    return options_url("centroid", options)
+    return mcs1.options_url("centroid", options)
 
 
 def centroid_options_from_url(url: str) -> CentroidSimOptions:
     """Parse ``sim://centroid?cameras=8&markers=40&rate=300...`` (ValueError if malformed)."""
-    options = parse_options_url(url, "centroid", CentroidSimOptions)
+    options = mcs1.parse_options_url(url, "centroid", CentroidSimOptions)
     options.validate()
     return options

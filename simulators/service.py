@@ -14,16 +14,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
+from spotlab.simulators import mcs1_service as mcs1
 from spotlab.simulators.faults import FaultInjector
 from spotlab.simulators.lab import PulseSource, lab_dir
-from spotlab.simulators.mcs1_service import (
-    POWER_UP_LEAD_NS,
-    device_clock,
-    lab_publisher,
-    options_url,
-    parse_options_url,
-    serve_device_pty,
-)
+from spotlab.simulators.mcs1_service import POWER_UP_LEAD_NS
 from spotlab.simulators.motions import MOTIONS, Delayed, make_motion
 from spotlab.simulators.scene import Ambient, Mirror, Scene, ring_rig
 from spotlab.simulators.selspot import SelspotDevice
@@ -150,7 +144,7 @@ def build_scene(options: SelspotSimOptions, epoch_ns: int | None = None) -> Scen
 def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> SelspotDevice:
     """A powered-up simulated SPX device (banner queued at 9600 baud)."""
     options.validate()
-    clock = device_clock(options, now_ns, options.clock_steps)
+    clock = mcs1.device_clock(options, now_ns, options.clock_steps)
     faults = FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed)
     scene = build_scene(options, clock.epoch_ns)
     device = SelspotDevice(
@@ -163,7 +157,7 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         fault_log=options.fault_log,
         default_rate_hz=options.rate_hz,
         now_ns=clock.epoch_ns,
-        lab=lab_publisher(options, clock),
+        lab=mcs1.lab_publisher(options, clock),
     )
     if options.rig_out is not None:
         device.psd.rig(scene.cameras).save(options.rig_out)
@@ -172,7 +166,7 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
 
 def url_for(options: SelspotSimOptions) -> str:
     """The ``sim://selspot?...`` URL of these options (defaults left out)."""
-    return options_url("selspot", options, safe="/@:,.-")
+    return mcs1.options_url("selspot", options, safe="/@:,.-")
 
 
 def options_from_url(url: str) -> SelspotSimOptions:
@@ -183,14 +177,14 @@ def options_from_url(url: str) -> SelspotSimOptions:
     ValueError
         For another family, an unknown option or a value of the wrong type.
     """
-    options = parse_options_url(url, "selspot", SelspotSimOptions)
+    options = mcs1.parse_options_url(url, "selspot", SelspotSimOptions)
     options.validate()
     return options
 
 
 def serve_pty(options: SelspotSimOptions) -> PtyServer:
     """Start serving a simulated device on a pseudo-terminal; ``.path`` is the stable link."""
-    return serve_device_pty(lambda now_ns: build_device(options, now_ns), "selspot")
+    return mcs1.serve_device_pty(lambda now_ns: build_device(options, now_ns), "selspot")
 
 
 def serve_tcp(options: SelspotSimOptions, port: int = 0) -> TcpServer:
@@ -270,7 +264,7 @@ class TimerSimOptions:
 def build_timer_device(options: TimerSimOptions, now_ns: int | None = None) -> TimerDevice:
     """A powered-up simulated TMR unit, its inputs wired through the lab folder."""
     options.validate()
-    clock = device_clock(options, now_ns, options.clock_steps)
+    clock = mcs1.device_clock(options, now_ns, options.clock_steps)
     folder = lab_dir(options.lab)
     return TimerDevice(
         clock,
@@ -287,12 +281,12 @@ def build_timer_device(options: TimerSimOptions, now_ns: int | None = None) -> T
 
 def serve_timer_pty(options: TimerSimOptions) -> PtyServer:
     """Serve a simulated TMR unit on a pseudo-terminal; ``.path`` is the stable link."""
-    return serve_device_pty(lambda now_ns: build_timer_device(options, now_ns), "timer")
+    return mcs1.serve_device_pty(lambda now_ns: build_timer_device(options, now_ns), "timer")
 
 
 def timer_url_for(options: TimerSimOptions) -> str:
     """The ``sim://timer?...`` URL of these options (defaults left out)."""
-    return options_url("timer", options)
+    return mcs1.options_url("timer", options)
 
 
 def device_from_url(url: str, now_ns: int | None = None) -> Mcs1Device[Any]:
@@ -302,6 +296,6 @@ def device_from_url(url: str, now_ns: int | None = None) -> Mcs1Device[Any]:
 
         return cen.build_centroid_device(cen.centroid_options_from_url(url), now_ns=now_ns)
     if urlsplit(url).netloc == "timer":
-        options = parse_options_url(url, "timer", TimerSimOptions)
+        options = mcs1.parse_options_url(url, "timer", TimerSimOptions)
         return build_timer_device(options, now_ns=now_ns)
     return build_device(options_from_url(url), now_ns=now_ns)
