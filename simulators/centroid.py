@@ -1,9 +1,9 @@
 """Byte-level emulator of the CEN video-centroid hub (docs/protocols/centroid.md).
 
-:class:`CentroidDevice` is an MCS-1 device like :class:`SelspotDevice` — it
-reuses its event loop, line pacing, link faults, FIFO, fault log and lab
-publishing — with the CEN command table and :class:`CentroidStream` in place of
-the SPX stream. Each frame the hub triggers its cameras; camera ``c`` exposes
+:class:`CentroidDevice` is an MCS-1 device
+(:class:`~spotlab.simulators.mcs1_device.Mcs1Device`: event loop, line pacing,
+link faults, FIFO, fault log and lab publishing) with the CEN command table and
+:class:`CentroidStream`. Each frame the hub triggers its cameras; camera ``c`` exposes
 after its own trigger delay, stamps the exposure mid-point with its own clock
 (a :class:`DeviceClock` with its own offset and drift) and renders the scene's
 markers as blobs (:mod:`spotlab.simulators.blobs`) at that instant.
@@ -18,9 +18,10 @@ Nothing here imports the driver: the device side is written from the spec.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -33,14 +34,13 @@ from spotlab.simulators.centroid_poses import body_for
 from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
-from spotlab.simulators.faults import FaultEntry, FaultInjector
-from spotlab.simulators.lab import LabPublisher, frame_start
+from spotlab.simulators.faults import FaultInjector
+from spotlab.simulators.lab import LabPublisher
+from spotlab.simulators.mcs1_commands import Handler
+from spotlab.simulators.mcs1_device import Mcs1Device
+from spotlab.simulators.mcs1_stream import Mcs1Stream, TakenFrame
 from spotlab.simulators.motions import Motion, reference_markers
-from spotlab.simulators.psd import PsdReading
 from spotlab.simulators.rigs import ring_rig as reference_rig
-from spotlab.simulators.scene import Scene, ring_rig
-from spotlab.simulators.selspot import SelspotDevice
-from spotlab.simulators.spx_stream import SpxStream, TakenFrame
 from spotlab.simulators.truth import TruthRow
 
 F64 = npt.NDArray[np.float64]
@@ -50,11 +50,6 @@ PROCESSING_S = 300e-6
 #: Sunlight blobs per frame on a sunlit camera.
 SUN_BLOBS = 3000
 FIFO_BYTES = 1 << 20
-_EMPTY = np.zeros((0, 0), dtype=np.uint16)
-_NO_READING = PsdReading(
-    x=_EMPTY, y=_EMPTY, intensity=_EMPTY.astype(np.uint8), flags=_EMPTY.astype(np.uint8),
-    power=_EMPTY.astype(np.float64),
-)  # fmt: skip
 
 
 @dataclass
@@ -85,34 +80,18 @@ class Episode:
         return camera == self.camera and self.at_s <= t_s < self.at_s + self.duration_s
 
 
-class CentroidStream(SpxStream):
+class CentroidStream(Mcs1Stream):
     """Hub frames of one ``START:`` .. ``STOP:`` period (see the module docstring)."""
 
     def __init__(self, device: CentroidDevice, config: CenConfig, start_ns: int, index: int):
         self.device = device
         self.cconfig = config
-        self.clock = device.clock
-        self.index = index
-        self.period_s = 1000.0 / config.rate_mhz
-        self.start_ns = start_ns
-        self.start_osc = self.clock.osc_s(start_ns)
-        self.frame_no = 0
-        self.seq = 0
         self.cams = config.cameras()
-        self._outbox: dict[int, bytes] = {}
-        self._last_bytes = cw.cen_frame_length(len(self.cams), 0)
-        self._steps_seen = self.clock.step_count(self.start_osc)
-        self.ready_ns, self._tick, self._osc0 = self._timing(0)
+        super().__init__(device.clock, index, config.rate_mhz, start_ns)
 
-    @property
-    def frame_bytes(self) -> int:
-        """Bytes of the frame taken last (frames vary in length)."""
-        return self._last_bytes
-
-    def _timing(self, k: int) -> tuple[int, int, float]:
-        tick, osc0 = frame_start(self.clock, self.start_osc, self.period_s, k)
-        done = osc0 + self.device.max_delay_s + self.cconfig.exposure_us * 1e-6 + PROCESSING_S
-        return self.clock.world_ns_at(done), tick, osc0
+    def _ready_osc(self, osc0: float) -> float:
+        """After the latest camera's exposure, and the readout."""
+        return osc0 + self.device.max_delay_s + self.cconfig.exposure_us * 1e-6 + PROCESSING_S
 
     def take(self) -> TakenFrame:
         """Expose every enabled camera, render the blobs, write the truth, schedule the next."""
@@ -157,37 +136,22 @@ class CentroidStream(SpxStream):
             self.frame_no, self._tick, 0, cfg.camera_mask, cfg.max_blobs, cfg.exposure_us,
             cfg.threshold, records,
         )  # fmt: skip
-        self._outbox[self.frame_no] = payload
-        self._last_bytes = len(payload) + cw.FRAME_OVERHEAD
         row = TruthRow(
             stream=self.index, frame_no=self.frame_no, world_ns=w_trig, device_us=self._tick,
             led_ids=np.zeros(0, dtype=np.int64), positions=np.zeros((0, 3)),
         )  # fmt: skip
         if dev.truth is not None:
             dev.truth.add(row, t_mid, X_both[-1], self.cams, truth_cams)
-        steps = self.clock.step_count(self._osc0)
-        taken = TakenFrame(
-            frame_no=self.frame_no, device_us=self._tick, reading=_NO_READING,
-            ambient_high=False, resynced=steps != self._steps_seen, truth=row,
-        )  # fmt: skip
-        self._steps_seen = steps
-        self.frame_no += 1
-        self.ready_ns, self._tick, self._osc0 = self._timing(self.frame_no)
-        return taken
+        return self._finish(payload, row)
 
-    def encode(self, taken: TakenFrame, status: int, flags: int) -> bytes:
-        """The whole data frame of ``taken`` with this stream's next seq (then seq += 1)."""
-        payload = bytearray(self._outbox.pop(taken.frame_no))
-        payload[8:10] = (status & 0xFFFF).to_bytes(2, "little")
-        data = cw.cen_frame(self.seq, bytes(payload), flags)
-        self.seq = (self.seq + 1) & 0xFFFF
-        return data
+    def _frame(self, seq: int, payload: bytes, flags: int) -> bytes:
+        return cw.cen_frame(seq, payload, flags)
 
 
 _NO_BLOBS = cw.quantise_blobs(np.zeros((0, 2)), [], [], [])
 
 
-class CentroidDevice(SelspotDevice):
+class CentroidDevice(Mcs1Device[CenConfig]):
     """A CEN hub with its cameras, as seen from its serial port.
 
     Parameters
@@ -217,10 +181,13 @@ class CentroidDevice(SelspotDevice):
         What the cameras see instead of the walking body: its markers, labels and
         positions (a wand dance, a static L-frame); no body occludes them.
     serial, seed, fault_log, default_rate_hz, now_ns, lab :
-        As :class:`SelspotDevice`.
+        As :class:`~spotlab.simulators.mcs1_device.Mcs1Device`.
     truth : path, optional
         Truth npz to write on close (:class:`CentroidTruth`).
     """
+
+    BAUD_RATES: ClassVar[Mapping[int, int]] = cw.CEN_BAUD_RATES
+    RATE_RANGE_MHZ: ClassVar[tuple[int, int]] = (1_000, 2_000_000)
 
     def __init__(
         self,
@@ -271,9 +238,8 @@ class CentroidDevice(SelspotDevice):
         self.ghost_pairs = rng.random((n_cams, markers)) < self.model.ghost_rate
         self._blob_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xB10B]))
         self._on_capsule = carried_by(40)
-        placeholder = Scene(motion=reference_markers(1, seed), cameras=ring_rig(1))
         super().__init__(
-            placeholder, clock, faults, serial=serial, seed=seed, fault_log=fault_log,
+            clock, faults, serial=serial, seed=seed, fault_log=fault_log,
             default_rate_hz=default_rate_hz, fifo_bytes=FIFO_BYTES, now_ns=now_ns, lab=lab,
         )  # fmt: skip
         if camera_clocks is None:
@@ -290,7 +256,6 @@ class CentroidDevice(SelspotDevice):
             raise ValueError(f"{len(camera_clocks)} camera clocks for {n_cams} cameras")
         self.camera_clocks = list(camera_clocks)
         self.truth = CentroidTruth(truth, self) if truth is not None else None
-        self._cconfig = CenConfig(rate_mhz=self._default_rate_mhz, camera_mask=(1 << n_cams) - 1)
 
     # -- the scene -----------------------------------------------------------------
     def positions(self, scene_s: F64) -> F64:
@@ -335,94 +300,34 @@ class CentroidDevice(SelspotDevice):
         )  # fmt: skip
 
     # -- life cycle ----------------------------------------------------------------
-    def _power_on(self, t: int, fault: FaultEntry | None) -> None:
-        super()._power_on(t, fault)
-        if hasattr(self, "rig"):
-            self._cconfig = CenConfig(
-                rate_mhz=self._default_rate_mhz, camera_mask=(1 << len(self.rig.cameras)) - 1
-            )
-
-    def close(self, now_ns: int | None = None, catch_up: bool = True) -> None:
-        """As :meth:`SelspotDevice.close`, and the truth npz is written."""
-        super().close(now_ns, catch_up)
+    def _flush_truth(self) -> None:
+        """The truth npz is written (the port closed)."""
         if self.truth is not None:
             self.truth.write()
 
-    def flush(self, now_ns: int | None = None) -> None:
-        """As :meth:`SelspotDevice.flush`, and the truth npz is written (the port closed)."""
-        super().flush(now_ns)
+    def _close_truth(self) -> None:
         if self.truth is not None:
             self.truth.write()
 
-    # -- commands ------------------------------------------------------------------
-    def handlers(self) -> dict[str, Callable[[Command, int], str | None]]:
-        """Verb -> handler (the MCS-1 common verbs and the CEN ones)."""
-        common = super().handlers()
+    # -- MCS-1 hooks ---------------------------------------------------------------
+    def _default_config(self) -> CenConfig:
+        return CenConfig(
+            rate_mhz=self._default_rate_mhz, camera_mask=(1 << len(self.rig.cameras)) - 1
+        )
+
+    def version_text(self) -> str:
+        """``CEN <firmware> <serial> <cameras> <max blobs> <camera tick Hz>``."""
+        n = len(self.rig.cameras)
+        return f"CEN {FIRMWARE} {self.serial} {n} {cw.MAX_BLOBS} {cw.CAMERA_TICK_HZ}"
+
+    def _family_handlers(self) -> dict[str, Handler]:
         return {
-            **{v: common[v] for v in ("RESET", "STAT", "TIME")},
-            "COMM": self._cen_comm, "INIT": self._cen_init, "VER": self._cen_ver,
-            "RATE": self._cen_rate, "START": self._cen_start, "STOP": self._cen_stop,
             "CAMS": self._cen_cams, "EXPO": self._cen_expo, "THRS": self._cen_thrs,
             "BLOB": self._cen_blob, "CONF": self._cen_conf,
         }  # fmt: skip
 
-    def _cen_comm(self, cmd: Command, t: int) -> None:
-        self._not_streaming()
-        code = self._int_param(cmd, 0, max(cw.CEN_BAUD_RATES))
-        chunk = self._reply("OKAY", t)
-        self._baud_switch = (chunk.end_ns, cw.CEN_BAUD_RATES[code])
-
-    def _cen_init(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._no_params(cmd)
-        self._cconfig = CenConfig(
-            rate_mhz=self._default_rate_mhz, camera_mask=(1 << len(self.rig.cameras)) - 1
-        )
-        return self._configured()
-
-    def _cen_ver(self, cmd: Command, t: int) -> str:
-        self._int_param(cmd, 0, 0)
-        n = len(self.rig.cameras)
-        return f"CEN {FIRMWARE} {self.serial} {n} {cw.MAX_BLOBS} {cw.CAMERA_TICK_HZ}"
-
-    def _cen_rate(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._cconfig.rate_mhz = self._int_param(cmd, 1_000, 2_000_000)
-        return self._configured()
-
-    def _cen_cams(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._cconfig.camera_mask = self._int_param(cmd, 1, (1 << len(self.rig.cameras)) - 1)
-        return self._configured()
-
-    def _cen_conf(self, cmd: Command, t: int) -> str:
-        """The configuration in force, as the commands that set it (centroid.md §2)."""
-        self._no_params(cmd)
-        c = self._cconfig
-        return (
-            f"CONF RATE={c.rate_mhz} CAMS={c.camera_mask} EXPO={c.exposure_us} "
-            f"THRS={c.threshold} BLOB={c.max_blobs}"
-        )
-
-    def _cen_expo(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._cconfig.exposure_us = self._int_param(cmd, 20, 10_000)
-        return self._configured()
-
-    def _cen_thrs(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._cconfig.threshold = self._int_param(cmd, 1, 254)
-        return self._configured()
-
-    def _cen_blob(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._cconfig.max_blobs = self._int_param(cmd, 1, cw.MAX_BLOBS)
-        return self._configured()
-
-    def _cen_start(self, cmd: Command, t: int) -> None:
-        self._not_streaming()
-        self._no_params(cmd)
-        cfg = self._cconfig
+    def _check_start(self) -> None:
+        cfg = self._config
         n = len(cfg.cameras())
         if cfg.exposure_us * cfg.rate_mhz > 900_000_000:
             raise CommandError(0x23)
@@ -431,21 +336,39 @@ class CentroidDevice(SelspotDevice):
             raise CommandError(0x80)
         if cfg.rate_mhz * cw.cen_frame_length(n, 0) * 10 > 800 * self._baud:
             raise CommandError(0x80)
-        self._anchor_faults(t)
-        self._reply("OKAY", t)
-        frozen = CenConfig(**cfg.__dict__)
-        stream: SpxStream = CentroidStream(self, frozen, t, self._streams)
-        self._stream = stream
-        self._streams += 1
-        self._overflow_left = 0
 
-    def _cen_stop(self, cmd: Command, t: int) -> str | None:
+    def _new_stream(self, t: int, index: int) -> Mcs1Stream:
+        return CentroidStream(self, CenConfig(**self._config.__dict__), t, index)
+
+    # -- CEN verbs -----------------------------------------------------------------
+    def _cen_cams(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._config.camera_mask = self._int_param(cmd, 1, (1 << len(self.rig.cameras)) - 1)
+        return self._configured()
+
+    def _cen_conf(self, cmd: Command, t: int) -> str:
+        """The configuration in force, as the commands that set it (centroid.md §2)."""
         self._no_params(cmd)
-        if self._stream is None:
-            return "OKAY"
-        self._reply("OKAY", t)
-        self._stream = None
-        return None
+        c = self._config
+        return (
+            f"CONF RATE={c.rate_mhz} CAMS={c.camera_mask} EXPO={c.exposure_us} "
+            f"THRS={c.threshold} BLOB={c.max_blobs}"
+        )
+
+    def _cen_expo(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._config.exposure_us = self._int_param(cmd, 20, 10_000)
+        return self._configured()
+
+    def _cen_thrs(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._config.threshold = self._int_param(cmd, 1, 254)
+        return self._configured()
+
+    def _cen_blob(self, cmd: Command, t: int) -> str:
+        self._not_streaming()
+        self._config.max_blobs = self._int_param(cmd, 1, cw.MAX_BLOBS)
+        return self._configured()
 
 
 __all__ = ["CenConfig", "CentroidDevice", "CentroidStream", "Episode"]

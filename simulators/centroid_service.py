@@ -8,26 +8,17 @@ pseudo-terminal and :func:`centroid_url_for` gives the in-process
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-from urllib.parse import quote
 
+from spotlab.simulators import mcs1_service as mcs1
 from spotlab.simulators.blobs import BlobModel
 from spotlab.simulators.centroid import CentroidDevice, Episode
 from spotlab.simulators.centroid_poses import BODY_MOTIONS
-from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import FaultInjector
-from spotlab.simulators.lab import LabPublisher, lab_dir
 from spotlab.simulators.motions import Motion, WandDance, reference_markers
 from spotlab.simulators.rigs import ring_rig
-from spotlab.simulators.service import (
-    _URL_SHORT,
-    FRAME_PULSE_WIDTH_S,
-    POWER_UP_LEAD_NS,
-    _options_from_url,
-)
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -200,10 +191,7 @@ def write_frame_points(path: Path) -> None:
 def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None) -> CentroidDevice:
     """A powered-up simulated CEN hub (and its rig written to ``rig_out``)."""
     options.validate()
-    clock = DeviceClock(
-        offset_s=options.clock_offset_s, drift_ppm=options.clock_drift_ppm,
-        jitter_s=options.clock_jitter_s, seed=options.seed, epoch_ns=now_ns,
-    )  # fmt: skip
+    clock = mcs1.device_clock(options, now_ns)
     # The rig does not depend on the seed: a lab's cameras stay put between trials.
     rig = ring_rig(max(options.cameras, 8))
     if options.cameras < 8:
@@ -220,12 +208,7 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
         occlusion=bool(options.occlusion), serial=options.serial, seed=options.seed,
         truth=options.truth, fault_log=options.fault_log, default_rate_hz=options.rate_hz,
         body_motion=options.motion if options.motion in BODY_MOTIONS else "walk",
-        now_ns=clock.epoch_ns,
-        lab=(
-            LabPublisher(lab_dir(options.lab), options.lab_name, clock, FRAME_PULSE_WIDTH_S)
-            if options.lab_name
-            else None
-        ),
+        now_ns=clock.epoch_ns, lab=mcs1.lab_publisher(options, clock),
         motion=centroid_motion(options),
     )  # fmt: skip
     if options.rig_out is not None:
@@ -237,28 +220,16 @@ def build_centroid_device(options: CentroidSimOptions, now_ns: int | None = None
 
 def serve_centroid_pty(options: CentroidSimOptions) -> PtyServer:
     """Serve a simulated CEN hub on a pseudo-terminal; ``.path`` is the stable link."""
-    from spotlab.simulators.transports.pty import PtyServer
-
-    device = build_centroid_device(options, now_ns=time.monotonic_ns() - POWER_UP_LEAD_NS)
-    server = PtyServer(device, name="centroid")
-    server.start()
-    return server
+    return mcs1.serve_device_pty(lambda now_ns: build_centroid_device(options, now_ns), "centroid")
 
 
 def centroid_url_for(options: CentroidSimOptions) -> str:
     """The ``sim://centroid?...`` URL of these options (defaults left out)."""
-    default = CentroidSimOptions()
-    parts = []
-    for f in fields(options):
-        value = getattr(options, f.name)
-        if value == getattr(default, f.name) or value is None:
-            continue
-        parts.append(f"{_URL_SHORT.get(f.name, f.name)}={quote(str(value), safe='/@:,.-=')}")
-    return "sim://centroid" + ("?" + "&".join(parts) if parts else "")
+    return mcs1.options_url("centroid", options)
 
 
 def centroid_options_from_url(url: str) -> CentroidSimOptions:
     """Parse ``sim://centroid?cameras=8&markers=40&rate=300...`` (ValueError if malformed)."""
-    options = _options_from_url(url, "centroid", CentroidSimOptions)
+    options = mcs1.parse_options_url(url, "centroid", CentroidSimOptions)
     options.validate()
     return options

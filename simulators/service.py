@@ -9,29 +9,22 @@ the equivalent in-process ``sim://`` URL (for ``serial.serial_for_url``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
-from urllib.parse import parse_qsl, quote, urlsplit
+from typing import TYPE_CHECKING, Any
+from urllib.parse import urlsplit
 
-from spotlab.simulators.clock import DeviceClock
+from spotlab.simulators import mcs1_service as mcs1
 from spotlab.simulators.faults import FaultInjector
-from spotlab.simulators.lab import LabPublisher, PulseSource, lab_dir
+from spotlab.simulators.lab import PulseSource, lab_dir
+from spotlab.simulators.mcs1_service import POWER_UP_LEAD_NS
 from spotlab.simulators.motions import MOTIONS, Delayed, make_motion
 from spotlab.simulators.scene import Ambient, Mirror, Scene, ring_rig
 from spotlab.simulators.selspot import SelspotDevice
 from spotlab.simulators.timer import TimerDevice
 
-_O = TypeVar("_O")
-
-# Served devices are switched on this long before their port exists: their
-# power-up banner is over by then, as with a device that was already running
-# when the host opened its port (a host resets it to see the banner).
-POWER_UP_LEAD_NS = 100_000_000
-#: Width of the frame pulse a simulated SPX system publishes to the lab.
-FRAME_PULSE_WIDTH_S = 10e-6
-
 if TYPE_CHECKING:
+    from spotlab.simulators.mcs1_device import Mcs1Device
     from spotlab.simulators.transports.pty import PtyServer
     from spotlab.simulators.transports.tcp import TcpServer
 
@@ -128,17 +121,6 @@ class SelspotSimOptions:
             )
 
 
-# URL query names of the options (short names first, the field names work too).
-_URL_NAMES = {
-    "rate": "rate_hz",
-    "clock_offset": "clock_offset_s",
-    "clock_drift": "clock_drift_ppm",
-    "clock_jitter": "clock_jitter_s",
-    "reflectance": "floor_reflectance",
-}
-_URL_SHORT = {v: k for k, v in _URL_NAMES.items()}
-
-
 def build_scene(options: SelspotSimOptions, epoch_ns: int | None = None) -> Scene:
     """The scene of a simulated system: ring rig, floor mirror, ambient light, motion.
 
@@ -162,14 +144,7 @@ def build_scene(options: SelspotSimOptions, epoch_ns: int | None = None) -> Scen
 def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> SelspotDevice:
     """A powered-up simulated SPX device (banner queued at 9600 baud)."""
     options.validate()
-    clock = DeviceClock(
-        offset_s=options.clock_offset_s,
-        drift_ppm=options.clock_drift_ppm,
-        jitter_s=options.clock_jitter_s,
-        steps=options.clock_steps,
-        seed=options.seed,
-        epoch_ns=now_ns,
-    )
+    clock = mcs1.device_clock(options, now_ns, options.clock_steps)
     faults = FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed)
     scene = build_scene(options, clock.epoch_ns)
     device = SelspotDevice(
@@ -182,11 +157,7 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
         fault_log=options.fault_log,
         default_rate_hz=options.rate_hz,
         now_ns=clock.epoch_ns,
-        lab=(
-            LabPublisher(lab_dir(options.lab), options.lab_name, clock, FRAME_PULSE_WIDTH_S)
-            if options.lab_name
-            else None
-        ),
+        lab=mcs1.lab_publisher(options, clock),
     )
     if options.rig_out is not None:
         device.psd.rig(scene.cameras).save(options.rig_out)
@@ -195,14 +166,7 @@ def build_device(options: SelspotSimOptions, now_ns: int | None = None) -> Selsp
 
 def url_for(options: SelspotSimOptions) -> str:
     """The ``sim://selspot?...`` URL of these options (defaults left out)."""
-    default = SelspotSimOptions()
-    parts = []
-    for f in fields(options):
-        value = getattr(options, f.name)
-        if value == getattr(default, f.name) or value is None:
-            continue
-        parts.append(f"{_URL_SHORT.get(f.name, f.name)}={quote(str(value), safe='/@:,.-')}")
-    return "sim://selspot" + ("?" + "&".join(parts) if parts else "")
+    return mcs1.options_url("selspot", options, safe="/@:,.-")
 
 
 def options_from_url(url: str) -> SelspotSimOptions:
@@ -213,46 +177,14 @@ def options_from_url(url: str) -> SelspotSimOptions:
     ValueError
         For another family, an unknown option or a value of the wrong type.
     """
-    options = _options_from_url(url, "selspot", SelspotSimOptions)
+    options = mcs1.parse_options_url(url, "selspot", SelspotSimOptions)
     options.validate()
     return options
 
 
-def _options_from_url(url: str, family: str, cls: type[_O]) -> _O:
-    """Options of class ``cls`` from the query of ``sim://FAMILY?...`` (not validated)."""
-    split = urlsplit(url)
-    if split.scheme != "sim" or split.netloc != family:
-        raise ValueError(f"not a simulated {family} URL: {url!r} (expected sim://{family}?...)")
-    kinds = {f.name: f.type for f in fields(cls)}  # type: ignore[arg-type]
-    values: dict[str, Any] = {}
-    for key, text in parse_qsl(split.query, keep_blank_values=True):
-        name = _URL_NAMES.get(key, key)
-        if name not in kinds:
-            raise ValueError(
-                f"unknown option {key!r} in {url!r}; known: {', '.join(sorted(kinds))}"
-            )
-        kind = str(kinds[name])
-        try:
-            if kind == "int":
-                values[name] = int(text)
-            elif kind in ("float", "float | None"):
-                values[name] = float(text)
-            elif "Path" in kind:
-                values[name] = Path(text) if text else None
-            else:
-                values[name] = text
-        except ValueError:
-            raise ValueError(f"option {key}={text!r} in {url!r} is not a valid {kind}") from None
-    return cls(**values)
-
-
 def serve_pty(options: SelspotSimOptions) -> PtyServer:
     """Start serving a simulated device on a pseudo-terminal; ``.path`` is the stable link."""
-    from spotlab.simulators.transports.pty import PtyServer
-
-    server = PtyServer(build_device(options, now_ns=time.monotonic_ns() - POWER_UP_LEAD_NS))
-    server.start()
-    return server
+    return mcs1.serve_device_pty(lambda now_ns: build_device(options, now_ns), "selspot")
 
 
 def serve_tcp(options: SelspotSimOptions, port: int = 0) -> TcpServer:
@@ -332,14 +264,7 @@ class TimerSimOptions:
 def build_timer_device(options: TimerSimOptions, now_ns: int | None = None) -> TimerDevice:
     """A powered-up simulated TMR unit, its inputs wired through the lab folder."""
     options.validate()
-    clock = DeviceClock(
-        offset_s=options.clock_offset_s,
-        drift_ppm=options.clock_drift_ppm,
-        jitter_s=options.clock_jitter_s,
-        steps=options.clock_steps,
-        seed=options.seed,
-        epoch_ns=now_ns,
-    )
+    clock = mcs1.device_clock(options, now_ns, options.clock_steps)
     folder = lab_dir(options.lab)
     return TimerDevice(
         clock,
@@ -356,32 +281,21 @@ def build_timer_device(options: TimerSimOptions, now_ns: int | None = None) -> T
 
 def serve_timer_pty(options: TimerSimOptions) -> PtyServer:
     """Serve a simulated TMR unit on a pseudo-terminal; ``.path`` is the stable link."""
-    from spotlab.simulators.transports.pty import PtyServer
-
-    device = build_timer_device(options, now_ns=time.monotonic_ns() - POWER_UP_LEAD_NS)
-    server = PtyServer(device, name="timer")
-    server.start()
-    return server
+    return mcs1.serve_device_pty(lambda now_ns: build_timer_device(options, now_ns), "timer")
 
 
 def timer_url_for(options: TimerSimOptions) -> str:
     """The ``sim://timer?...`` URL of these options (defaults left out)."""
-    default = TimerSimOptions()
-    parts = []
-    for f in fields(options):
-        value = getattr(options, f.name)
-        if value == getattr(default, f.name) or value is None:
-            continue
-        parts.append(f"{_URL_SHORT.get(f.name, f.name)}={quote(str(value), safe='/@:,.-=')}")
-    return "sim://timer" + ("?" + "&".join(parts) if parts else "")
+    return mcs1.options_url("timer", options)
 
 
-def device_from_url(url: str, now_ns: int | None = None) -> SelspotDevice:
+def device_from_url(url: str, now_ns: int | None = None) -> Mcs1Device[Any]:
     """The simulated device a ``sim://selspot|timer|centroid?...`` URL describes."""
     if urlsplit(url).netloc == "centroid":
         from spotlab.simulators import centroid_service as cen
 
         return cen.build_centroid_device(cen.centroid_options_from_url(url), now_ns=now_ns)
     if urlsplit(url).netloc == "timer":
-        return build_timer_device(_options_from_url(url, "timer", TimerSimOptions), now_ns=now_ns)
+        options = mcs1.parse_options_url(url, "timer", TimerSimOptions)
+        return build_timer_device(options, now_ns=now_ns)
     return build_device(options_from_url(url), now_ns=now_ns)

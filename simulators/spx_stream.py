@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
-from spotlab.simulators.lab import frame_start
+from spotlab.simulators.mcs1_stream import Mcs1Stream, TakenFrame
 from spotlab.simulators.psd import PsdModel, PsdReading
 from spotlab.simulators.scene import Scene
 from spotlab.simulators.truth import TruthRow
@@ -58,19 +58,7 @@ class SpxConfig:
         return self.rate_mhz * frame * 10 <= 800 * baud
 
 
-@dataclass
-class TakenFrame:
-    """A frame sampled by the cameras, before the device decides whether to send it."""
-
-    frame_no: int
-    device_us: int
-    reading: PsdReading
-    ambient_high: bool
-    resynced: bool
-    truth: TruthRow
-
-
-class SpxStream:
+class SpxStream(Mcs1Stream):
     """Frames of one ``START:`` .. ``STOP:`` period.
 
     Parameters
@@ -97,31 +85,18 @@ class SpxStream:
         rng: np.random.Generator,
     ) -> None:
         self.config = config
-        self.scene, self.clock, self.psd, self.rng = scene, clock, psd, rng
-        self.index = index
+        self.scene, self.psd, self.rng = scene, psd, rng
         self.ids = np.array([i for i, _ in config.table], dtype=np.int64)
         self.current = np.array([c for _, c in config.table], dtype=np.int64)
         self.agc_limit = np.zeros(self.ids.size, dtype=bool)
         self.n = self.ids.size
         self.cams = config.cameras
         self.slot_s = config.slot_us * 1e-6
-        self.period_s = 1000.0 / config.rate_mhz
-        self.start_osc = clock.osc_s(start_ns)
-        self.frame_no = 0
-        self.seq = 0
-        self._steps_seen = clock.step_count(self.start_osc)
-        self.ready_ns, self._tick, self._osc0 = self._timing(0)
+        super().__init__(clock, index, config.rate_mhz, start_ns)
 
-    def _timing(self, k: int) -> tuple[int, int, float]:
-        """(ready world ns, tick in µs unwrapped, true oscillator start) of frame ``k``."""
-        tick, osc0 = frame_start(self.clock, self.start_osc, self.period_s, k)
-        done = osc0 + (self.n + 1 + self.config.dark_slots()) * self.slot_s
-        return self.clock.world_ns_at(done), tick, osc0
-
-    @property
-    def frame_bytes(self) -> int:
-        """Bytes of one whole data frame of this stream."""
-        return wire.spx_frame_length(self.n, self.cams)
+    def _ready_osc(self, osc0: float) -> float:
+        """One slot after the last (LED or dark) slot."""
+        return osc0 + (self.n + 1 + self.config.dark_slots()) * self.slot_s
 
     def take(self) -> TakenFrame:
         """Sample the scene for the frame that is ready now, run AGC, schedule the next one."""
@@ -155,7 +130,6 @@ class SpxStream:
         if c < self.cams:
             reading = _with_absent_cameras(reading, self.cams - c)
         reading.flags |= np.where(self.agc_limit[:, None], wire.FLAG_AGC_LIMIT, 0).astype(np.uint8)
-        steps = self.clock.step_count(self._osc0)
         truth = TruthRow(
             stream=self.index,
             frame_no=self.frame_no,
@@ -164,20 +138,14 @@ class SpxStream:
             led_ids=self.ids,
             positions=positions,
         )
-        taken = TakenFrame(
-            frame_no=self.frame_no,
-            device_us=self._tick,
-            reading=reading,
-            ambient_high=bool(np.any(reading.flags & wire.FLAG_AMBIENT_HIGH)),
-            resynced=steps != self._steps_seen,
-            truth=truth,
-        )
-        self._steps_seen = steps
+        payload = wire.spx_payload(
+            self.frame_no, self._tick, 0, cfg.slot_us, reading.x, reading.y, reading.intensity,
+            reading.flags,
+        )  # fmt: skip
+        ambient_high = bool(np.any(reading.flags & wire.FLAG_AMBIENT_HIGH))
         if cfg.agc_on:
             self._agc(reading)
-        self.frame_no += 1
-        self.ready_ns, self._tick, self._osc0 = self._timing(self.frame_no)
-        return taken
+        return self._finish(payload, truth, ambient_high)
 
     def _agc(self, reading: PsdReading) -> None:
         """Per LED, steer the drive current so that the brightest valid camera nears the target."""
@@ -194,22 +162,8 @@ class SpxStream:
         self.agc_limit = new != wanted
         self.current = new
 
-    def encode(self, taken: TakenFrame, status: int, flags: int) -> bytes:
-        """The whole data frame for ``taken`` with this stream's next seq (then seq += 1)."""
-        r = taken.reading
-        payload = wire.spx_payload(
-            taken.frame_no,
-            taken.device_us,
-            status,
-            self.config.slot_us,
-            r.x,
-            r.y,
-            r.intensity,
-            r.flags,
-        )
-        data = wire.frame(wire.FRAME_SPX, self.seq, payload, flags)
-        self.seq = (self.seq + 1) & 0xFFFF
-        return data
+    def _frame(self, seq: int, payload: bytes, flags: int) -> bytes:
+        return wire.frame(wire.FRAME_SPX, seq, payload, flags)
 
     def led_query(self) -> str:
         """``LEDQ`` entries: the table with the drive currents in force now."""

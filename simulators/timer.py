@@ -1,8 +1,9 @@
 """Byte-level emulator of the TMR timer/sync unit (docs/protocols/timer.md).
 
-:class:`TimerDevice` is an MCS-1 device like :class:`SelspotDevice` — it reuses
-its event loop, line pacing, fault injection, FIFO, truth and fault log — with
-the TMR command table and :class:`TimerStream` in place of the SPX stream. Its
+:class:`TimerDevice` is an MCS-1 device
+(:class:`~spotlab.simulators.mcs1_device.Mcs1Device`: event loop, line pacing,
+fault injection, FIFO, truth and fault log) with the TMR command table and
+:class:`TimerStream`, which carries edges instead of a scene. Its
 inputs are wired to other simulators' frame pulses through the lab folder
 (:mod:`spotlab.simulators.lab`): input ``i`` wired to ``name`` captures an edge
 at the true world instant of each of that device's frame pulses, stamped with
@@ -24,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,12 +36,10 @@ from spotlab.simulators import wire
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
 from spotlab.simulators.faults import FaultEntry, FaultInjector
-from spotlab.simulators.lab import PulseSource, frame_start
-from spotlab.simulators.motions import reference_markers
-from spotlab.simulators.psd import PsdReading
-from spotlab.simulators.scene import Scene, ring_rig
-from spotlab.simulators.selspot import SelspotDevice
-from spotlab.simulators.spx_stream import SpxStream, TakenFrame
+from spotlab.simulators.lab import PulseSource
+from spotlab.simulators.mcs1_commands import Handler
+from spotlab.simulators.mcs1_device import Mcs1Device
+from spotlab.simulators.mcs1_stream import Mcs1Stream, TakenFrame
 from spotlab.simulators.truth import TruthRow, TruthWriter
 
 FIRMWARE = "1.0"
@@ -48,11 +47,6 @@ FIRMWARE = "1.0"
 ASSEMBLY_S = 20e-6
 #: Records waiting beyond this many frames' worth of slots are dropped.
 BACKLOG_FRAMES = 4
-_EMPTY = np.zeros((0, 0), dtype=np.uint16)
-_NO_READING = PsdReading(
-    x=_EMPTY, y=_EMPTY, intensity=_EMPTY.astype(np.uint8), flags=_EMPTY.astype(np.uint8),
-    power=_EMPTY.astype(np.float64),
-)  # fmt: skip
 EDGE_COLUMNS = (
     "channel,edge_index,rising,true_time_s,timer_tick,source,source_stream,source_frame_no,"
     "timer_frame_no"
@@ -102,7 +96,7 @@ class EdgeTruthWriter:
             self._lines.clear()
 
 
-class TimerStream(SpxStream):
+class TimerStream(Mcs1Stream):
     """Timer frames of one ``START:`` .. ``STOP:`` period, with the edges they carry.
 
     Frame ``k`` starts on the whole µs nearest oscillator time ``start + k / rate``
@@ -113,30 +107,15 @@ class TimerStream(SpxStream):
     def __init__(self, device: TimerDevice, config: TimerConfig, start_ns: int, index: int):
         self.device = device
         self.tconfig = config
-        self.clock = device.clock
-        self.index = index
-        self.period_s = 1000.0 / config.rate_mhz
-        self.start_ns = start_ns
-        self.start_osc = self.clock.osc_s(start_ns)
-        self.frame_no = 0
-        self.seq = 0
         self.counts: dict[int, int] = {}
         self.queue: deque[_Pending] = deque()
         self.edges_lost = 0
-        self._outbox: dict[int, bytes] = {}
         self._prev_tick: int | None = None
-        self._steps_seen = self.clock.step_count(self.start_osc)
         self._done: dict[tuple[int, str, int], float] = {}
-        self.ready_ns, self._tick, self._osc0 = self._timing(0)
+        super().__init__(device.clock, index, config.rate_mhz, start_ns)
 
-    @property
-    def frame_bytes(self) -> int:
-        """Bytes of one whole timer data frame, ``44 + 12 E``."""
-        return tw.tmr_frame_length(self.tconfig.slots)
-
-    def _timing(self, k: int) -> tuple[int, int, float]:
-        tick, osc0 = frame_start(self.clock, self.start_osc, self.period_s, k)
-        return self.clock.world_ns_at(osc0 + ASSEMBLY_S), tick, osc0
+    def _ready_osc(self, osc0: float) -> float:
+        return osc0 + ASSEMBLY_S
 
     def counter_at(self, world_ns: float, jitter_s: float = 0.0) -> int:
         """The timer counter (10 MHz ticks) at world ``world_ns``, with capture jitter."""
@@ -213,42 +192,22 @@ class TimerStream(SpxStream):
             for p in sent:
                 dev.edge_truth.add(p, self.frame_no)
         tc = None if cfg.timecode is None else tw.timecode_at(counter, *cfg.timecode)
-        self._outbox[self.frame_no] = tw.tmr_payload(
+        payload = tw.tmr_payload(
             self.frame_no, counter, 0, dev.armed_mask(), self.edges_lost, cfg.slots,
             [p.record for p in sent], tc,
         )  # fmt: skip
-        steps = self.clock.step_count(self._osc0)
-        taken = TakenFrame(
-            frame_no=self.frame_no,
-            device_us=self._tick,
-            reading=_NO_READING,
-            ambient_high=False,
-            resynced=steps != self._steps_seen,
-            truth=TruthRow(
-                stream=self.index,
-                frame_no=self.frame_no,
-                world_ns=w_frame + jitter_ns,
-                device_us=self._tick,
-                led_ids=np.zeros(0, dtype=np.int64),
-                positions=np.zeros((0, 3)),
-            ),
-        )
-        self._steps_seen = steps
+        truth = TruthRow(
+            stream=self.index, frame_no=self.frame_no, world_ns=w_frame + jitter_ns,
+            device_us=self._tick, led_ids=np.zeros(0, dtype=np.int64), positions=np.zeros((0, 3)),
+        )  # fmt: skip
         self._prev_tick = counter
-        self.frame_no += 1
-        self.ready_ns, self._tick, self._osc0 = self._timing(self.frame_no)
-        return taken
+        return self._finish(payload, truth)
 
-    def encode(self, taken: TakenFrame, status: int, flags: int) -> bytes:
-        """The whole data frame of ``taken`` with this stream's next seq (then seq += 1)."""
-        payload = bytearray(self._outbox.pop(taken.frame_no))
-        payload[8:10] = (status & 0xFFFF).to_bytes(2, "little")
-        data = wire.frame(tw.FRAME_TMR, self.seq, bytes(payload), flags)
-        self.seq = (self.seq + 1) & 0xFFFF
-        return data
+    def _frame(self, seq: int, payload: bytes, flags: int) -> bytes:
+        return wire.frame(tw.FRAME_TMR, seq, payload, flags)
 
 
-class TimerDevice(SelspotDevice):
+class TimerDevice(Mcs1Device[TimerConfig]):
     """A TMR timer/sync unit as seen from its serial port.
 
     Parameters
@@ -292,19 +251,17 @@ class TimerDevice(SelspotDevice):
         bad = [i for i in self.wiring if not 0 <= i < tw.MAX_INPUTS]
         if bad:
             raise ValueError(f"inputs are 0-{tw.MAX_INPUTS - 1}, got {bad}")
-        self._tconfig = TimerConfig(rate_mhz=round(default_rate_hz * 1000))
         self._arm: dict[int, list[tuple[float, int]]] = {}
         self.periodic: dict[int, tuple[int, int]] = {}
         self.one_shots: deque[tuple[int, int]] = deque()
-        placeholder = Scene(motion=reference_markers(1, seed), cameras=ring_rig(1))
+        if truth is not None and edge_truth is None:
+            edge_truth = f"{truth}.edges.csv"
+        self.edge_truth = EdgeTruthWriter(edge_truth) if edge_truth is not None else None
         super().__init__(
-            placeholder, clock, faults, serial=serial, seed=seed, fault_log=fault_log,
+            clock, faults, serial=serial, seed=seed,
+            truth=TruthWriter(truth, 0) if truth is not None else None, fault_log=fault_log,
             default_rate_hz=default_rate_hz, now_ns=now_ns,
         )  # fmt: skip
-        if truth is not None:
-            self._truth = TruthWriter(truth, 0)
-            edge_truth = edge_truth if edge_truth is not None else f"{truth}.edges.csv"
-        self.edge_truth = EdgeTruthWriter(edge_truth) if edge_truth is not None else None
 
     # -- state the stream reads ----------------------------------------------------
     def armed_for(self, channel: int, rising: bool, world_ns: float) -> bool:
@@ -326,74 +283,68 @@ class TimerDevice(SelspotDevice):
 
     def _power_on(self, t: int, fault: FaultEntry | None) -> None:
         super()._power_on(t, fault)
-        self._tconfig = TimerConfig(rate_mhz=self._default_rate_mhz)
         self._arm = {}
         self.periodic = {}
         self.one_shots = deque()
 
-    def close(self, now_ns: int | None = None, catch_up: bool = True) -> None:
-        """As :meth:`SelspotDevice.close`, and the edge truth is written."""
-        super().close(now_ns, catch_up)
+    def _flush_truth(self) -> None:
+        super()._flush_truth()
         if self.edge_truth is not None:
             self.edge_truth.flush()
 
-    def flush(self, now_ns: int | None = None) -> None:
-        """As :meth:`SelspotDevice.flush`, and the edge truth is written."""
-        super().flush(now_ns)
+    def _close_truth(self) -> None:
+        super()._close_truth()
         if self.edge_truth is not None:
             self.edge_truth.flush()
 
-    # -- commands ------------------------------------------------------------------
-    def handlers(self) -> dict[str, Callable[[Command, int], str | None]]:
-        """Verb -> handler (the MCS-1 common verbs and the TMR ones)."""
-        common = super().handlers()
-        return {
-            **{v: common[v] for v in ("RESET", "COMM", "STAT", "TIME")},
-            "INIT": self._tmr_init, "VER": self._tmr_ver, "RATE": self._tmr_rate,
-            "START": self._tmr_start, "STOP": self._tmr_stop, "EDGS": self._tmr_edgs,
-            "ARM": self._tmr_arm, "PULS": self._tmr_puls, "POUT": self._tmr_pout,
-            "TCOD": self._tmr_tcod, "CONF": self._tmr_conf,
-        }  # fmt: skip
+    # -- MCS-1 hooks ---------------------------------------------------------------
+    def _default_config(self) -> TimerConfig:
+        return TimerConfig(rate_mhz=self._default_rate_mhz)
 
-    def _tmr_init(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._no_params(cmd)
-        self._tconfig = TimerConfig(rate_mhz=self._default_rate_mhz)
-        return self._configured()
-
-    def _tmr_ver(self, cmd: Command, t: int) -> str:
-        self._int_param(cmd, 0, 0)
+    def version_text(self) -> str:
+        """``TMR <firmware> <serial> <inputs> <outputs> <tick Hz>``."""
         return f"TMR {FIRMWARE} {self.serial} {tw.MAX_INPUTS} {tw.MAX_OUTPUTS} {tw.TICK_HZ}"
 
-    def _tmr_rate(self, cmd: Command, t: int) -> str:
-        self._not_streaming()
-        self._tconfig.rate_mhz = self._int_param(cmd, 1_000, 10_000_000)
-        return self._configured()
+    def _family_handlers(self) -> dict[str, Handler]:
+        return {
+            "EDGS": self._tmr_edgs, "ARM": self._tmr_arm, "PULS": self._tmr_puls,
+            "POUT": self._tmr_pout, "TCOD": self._tmr_tcod, "CONF": self._tmr_conf,
+        }  # fmt: skip
 
+    def _check_start(self) -> None:
+        cfg = self._config
+        if cfg.rate_mhz * tw.tmr_frame_length(cfg.slots) * 10 > 800 * self._baud:
+            raise CommandError(0x80)
+
+    def _new_stream(self, t: int, index: int) -> Mcs1Stream:
+        cfg = self._config
+        return TimerStream(self, TimerConfig(cfg.rate_mhz, cfg.slots, cfg.timecode), t, index)
+
+    # -- TMR verbs -----------------------------------------------------------------
     def _tmr_conf(self, cmd: Command, t: int) -> str:
         """The configuration in force, as the commands that set it (timer.md §2)."""
         self._no_params(cmd)
-        c = self._tconfig
+        c = self._config
         tc = "0" if c.timecode is None else f"1,{c.timecode[0]},{int(c.timecode[1])}"
         return f"CONF RATE={c.rate_mhz} EDGS={c.slots} TCOD={tc}"
 
     def _tmr_edgs(self, cmd: Command, t: int) -> str:
         self._not_streaming()
-        self._tconfig.slots = self._int_param(cmd, 1, tw.MAX_SLOTS)
+        self._config.slots = self._int_param(cmd, 1, tw.MAX_SLOTS)
         return self._configured()
 
     def _tmr_tcod(self, cmd: Command, t: int) -> str:
         self._not_streaming()
         if len(cmd.params) == 1:
             self._int_param(cmd, 0, 0)
-            self._tconfig.timecode = None
+            self._config.timecode = None
             return self._configured()
         on = self._int_param(cmd, 1, 1, count=3, index=0)
         fps = self._int_param(cmd, 24, 30, count=3, index=1)
         df = self._int_param(cmd, 0, 1, count=3, index=2)
         if on != 1 or (fps, bool(df)) not in tw.FRAMES_PER_DAY:
             raise CommandError(0x23)
-        self._tconfig.timecode = (fps, bool(df))
+        self._config.timecode = (fps, bool(df))
         return self._configured()
 
     def _tmr_arm(self, cmd: Command, t: int) -> str:
@@ -421,25 +372,3 @@ class TimerDevice(SelspotDevice):
         else:
             self.periodic[out] = (period * tw.TICKS_PER_US, self._counter_now(t))
         return "OKAY"
-
-    def _tmr_start(self, cmd: Command, t: int) -> None:
-        self._not_streaming()
-        self._no_params(cmd)
-        cfg = self._tconfig
-        if cfg.rate_mhz * tw.tmr_frame_length(cfg.slots) * 10 > 800 * self._baud:
-            raise CommandError(0x80)
-        self._anchor_faults(t)
-        self._reply("OKAY", t)
-        frozen = TimerConfig(cfg.rate_mhz, cfg.slots, cfg.timecode)
-        stream: SpxStream = TimerStream(self, frozen, t, self._streams)
-        self._stream = stream
-        self._streams += 1
-        self._overflow_left = 0
-
-    def _tmr_stop(self, cmd: Command, t: int) -> str | None:
-        self._no_params(cmd)
-        if self._stream is None:
-            return "OKAY"
-        self._reply("OKAY", t)
-        self._stream = None
-        return None

@@ -2,7 +2,7 @@
 
 Once ``"spotlab.simulators.transports"`` is in ``serial.protocol_handler_packages``
 (``import spotlab.simulators`` puts it there), ``serial.serial_for_url(url)``
-returns a port wired to a :class:`SelspotDevice`, e.g.::
+returns a port wired to a :class:`Mcs1Device`, e.g.::
 
     sim://selspot?cameras=4&leds=32&rate=200&seed=1&faults=bitflip@1.5&truth=/tmp/t.csv
 
@@ -30,7 +30,7 @@ import numpy as np
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from spotlab.simulators.line import garble
-from spotlab.simulators.selspot import SelspotDevice
+from spotlab.simulators.mcs1_device import Mcs1Device
 from spotlab.simulators.service import POWER_UP_LEAD_NS, device_from_url
 
 MIN_WAIT_NS = 1_000_000
@@ -47,7 +47,7 @@ class Serial(SerialBase):
     is_open: bool
 
     def __init__(self, *args: object, **kwargs: object) -> None:
-        self.device: SelspotDevice | None = None
+        self.device: Mcs1Device | None = None
         self._rx = bytearray()
         self._bauds: list[tuple[int, int]] = []
         self._opened_ns = 0
@@ -125,7 +125,7 @@ class Serial(SerialBase):
         return True
 
     # -- data ----------------------------------------------------------------
-    def _check_link(self, now: int) -> SelspotDevice:
+    def _check_link(self, now: int) -> Mcs1Device:
         if not self.is_open or self.device is None:
             raise PortNotOpenError()
         if not self._dead and self.device.link_broken_between(self._opened_ns, now):

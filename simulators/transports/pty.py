@@ -33,7 +33,7 @@ from types import TracebackType
 import numpy as np
 
 from spotlab.simulators.line import Segment, garble
-from spotlab.simulators.selspot import SelspotDevice
+from spotlab.simulators.mcs1_device import Mcs1Device
 
 TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on Linux
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
@@ -68,7 +68,7 @@ class PtyServer:
 
     Parameters
     ----------
-    device : SelspotDevice
+    device : Mcs1Device
         The device to serve (closed by :meth:`stop`).
     name : str
         File name of the stable link.
@@ -84,7 +84,7 @@ class PtyServer:
         its FIFO instead), ``reconnects``.
     """
 
-    def __init__(self, device: SelspotDevice, name: str = "selspot") -> None:
+    def __init__(self, device: Mcs1Device, name: str = "selspot") -> None:
         self.device = device
         self._dir = Path(tempfile.mkdtemp(prefix="spotlab-sim-"))
         self.path = self._dir / name

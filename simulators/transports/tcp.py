@@ -17,7 +17,7 @@ import threading
 import time
 from types import TracebackType
 
-from spotlab.simulators.selspot import SelspotDevice
+from spotlab.simulators.mcs1_device import Mcs1Device
 
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
@@ -31,7 +31,7 @@ class TcpServer:
 
     Parameters
     ----------
-    device : SelspotDevice
+    device : Mcs1Device
         The device to serve (closed by :meth:`stop`).
     port : int
         TCP port; 0 picks a free one.
@@ -42,7 +42,7 @@ class TcpServer:
         ``socket://127.0.0.1:PORT``, for ``serial.serial_for_url``.
     """
 
-    def __init__(self, device: SelspotDevice, port: int = 0) -> None:
+    def __init__(self, device: Mcs1Device, port: int = 0) -> None:
         self.device = device
         self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
