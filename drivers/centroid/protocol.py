@@ -27,21 +27,22 @@ blobs one camera sent in the block; ``B`` varies from block to block, use
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ProtocolError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.drivers.centroid.config import CentroidConfig
 from spotlab.drivers.centroid.framing import VariableFrameDecoder
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch
+from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
+from spotlab.drivers.mcs1.framing import FrameBatch
 from spotlab.drivers.mcs1.metadata import recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.mcs1.version import VersionReply
 
 log = logging.getLogger(__name__)
 
@@ -79,8 +80,11 @@ _HUB_END = 30  # header (10) + hub header (20)
 
 
 @dataclass(frozen=True)
-class CentroidVersion:
+class CentroidVersion(VersionReply):
     """What a CEN hub says of itself in reply to ``VER:0`` (centroid.md §2)."""
+
+    code = FAMILY_CODE
+    form = "<cameras> <max blobs> <camera tick Hz>"
 
     firmware: str
     serial_number: str
@@ -88,10 +92,6 @@ class CentroidVersion:
     max_blobs: int
     tick_hz: int
     text: str
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-        return asdict(self)
 
 
 def parse_version(text: str) -> CentroidVersion:
@@ -102,21 +102,10 @@ def parse_version(text: str) -> CentroidVersion:
     ProtocolError
         If it is not a CEN version reply of that form.
     """
-    fields = text.split()
-    try:
-        if len(fields) < 6 or fields[0] != FAMILY_CODE:
-            raise ValueError(text)
-        return CentroidVersion(
-            fields[1], fields[2], int(fields[3]), int(fields[4]), int(fields[5]), text
-        )
-    except ValueError as exc:
-        raise ProtocolError(
-            f"VER:0 reply {text!r} is not 'CEN <firmware> <serial> <cameras> <max blobs> "
-            "<camera tick Hz>'"
-        ) from exc
+    return CentroidVersion.parse(text)
 
 
-class CentroidDecoder:
+class CentroidDecoder(Mcs1StreamDecoder):
     """Bytes of a CEN link in, :class:`FrameBlock` out (a ``StreamDecoder``).
 
     Parameters
@@ -167,44 +156,6 @@ class CentroidDecoder:
         if not isinstance(config, CentroidConfig):
             config = CentroidConfig.from_dict(config)
         return cls(config, stats=stats)
-
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered) received at host ``arrival_ns``."""
-        self.stats.bytes += len(data)
-        return self._decode(self._frames.feed(data, arrival_ns))
-
-    def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay); stamps stay per read."""
-        chunks = list(chunks)
-        self.stats.bytes += sum(len(data) for data, _ in chunks)
-        return self._decode(self._frames.feed_many(chunks))
-
-    def flush(self) -> FrameBlock:
-        """End of input: resolve the bytes still buffered."""
-        return self._decode(self._frames.flush())
-
-    def mark_discontinuity(self) -> None:
-        """The link was broken or the stream restarted."""
-        self._frames.discard()
-        self._tracker.mark_discontinuity()
-
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
-        return self._frames.take_events()
-
-    @property
-    def banner_seen(self) -> bool:
-        """Whether the reset banner appeared between frames (the device reset itself)."""
-        return self._frames.banner_seen
-
-    @banner_seen.setter
-    def banner_seen(self, value: bool) -> None:
-        self._frames.banner_seen = value
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded or discarded."""
-        return self._frames.buffered
 
     def summary(self) -> dict[str, Any]:
         """Blob counts for ``spotlab info``: blobs per frame, overflows and gaps per camera."""

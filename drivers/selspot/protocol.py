@@ -11,19 +11,21 @@ same object decodes a live link and a recording.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
+from spotlab.drivers.mcs1.framing import FrameBatch, FrameDecoder
 from spotlab.drivers.mcs1.metadata import recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.mcs1.version import VersionReply
 from spotlab.drivers.selspot.config import SelspotConfig, led_table
 
 log = logging.getLogger(__name__)
@@ -139,7 +141,7 @@ def decode_records(
 
 
 @dataclass(frozen=True)
-class DeviceVersion:
+class DeviceVersion(VersionReply):
     """What an SPX device says of itself in reply to ``VER:0`` (selspot.md §2).
 
     Attributes
@@ -154,15 +156,14 @@ class DeviceVersion:
         The whole reply text.
     """
 
+    code = FAMILY_CODE
+    form = "<max cameras> <max LEDs>"
+
     firmware: str
     serial_number: str
     max_cameras: int
     max_leds: int
     text: str
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-        return asdict(self)
 
 
 def parse_version(text: str) -> DeviceVersion:
@@ -173,18 +174,10 @@ def parse_version(text: str) -> DeviceVersion:
     ProtocolError
         If it is not an SPX version reply of that form; the message shows it.
     """
-    fields = text.split()
-    try:
-        if len(fields) < 5 or fields[0] != FAMILY_CODE:
-            raise ValueError(text)
-        return DeviceVersion(fields[1], fields[2], int(fields[3]), int(fields[4]), text)
-    except ValueError as exc:
-        raise ProtocolError(
-            f"VER:0 reply {text!r} is not 'SPX <firmware> <serial> <max cameras> <max LEDs>'"
-        ) from exc
+    return DeviceVersion.parse(text)
 
 
-class SelspotDecoder:
+class SelspotDecoder(Mcs1StreamDecoder):
     """Bytes of an SPX link in, :class:`FrameBlock` out (a ``StreamDecoder``).
 
     Parameters
@@ -260,73 +253,6 @@ class SelspotDecoder:
             frame_period_us=1e9 / config.rate_mhz,
         )
 
-    # -- StreamDecoder ---------------------------------------------------------------
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered).
-
-        Parameters
-        ----------
-        data : bytes-like
-            Bytes as read from the link.
-        arrival_ns : int
-            Host monotonic time of that read in ns.
-
-        Returns
-        -------
-        FrameBlock
-            Frames completed by ``data``: data (F, N, C, 3), flags (F, N, C).
-        """
-        self.stats.bytes += len(data)
-        return self._decode(self._frames.feed(data, arrival_ns))
-
-    def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay of a journal); stamps stay per read.
-
-        Parameters
-        ----------
-        chunks : iterable of (bytes-like, int)
-            ``(data, arrival_ns)`` in the order they were read.
-
-        Returns
-        -------
-        FrameBlock
-            The same frames as feeding the chunks one by one, at bulk speed.
-        """
-        chunks = list(chunks)
-        self.stats.bytes += sum(len(data) for data, _ in chunks)
-        return self._decode(self._frames.feed_many(chunks))
-
-    def flush(self) -> FrameBlock:
-        """End of input, or the link went quiet: resolve the bytes still buffered.
-
-        A frame still waiting for its end is counted as truncated.
-        """
-        return self._decode(self._frames.flush())
-
-    def mark_discontinuity(self) -> None:
-        """The link was broken (reset, reconnect): drop buffered bytes, restart the counters."""
-        self._frames.discard()
-        self._tracker.mark_discontinuity()
-
-    # -- extras --------------------------------------------------------------------------
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
-        return self._frames.take_events()
-
-    @property
-    def banner_seen(self) -> bool:
-        """Whether the reset banner appeared between frames (the device reset itself)."""
-        return self._frames.banner_seen
-
-    @banner_seen.setter
-    def banner_seen(self, value: bool) -> None:
-        self._frames.banner_seen = value
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded or discarded."""
-        return self._frames.buffered
-
     @property
     def frame_bytes(self) -> int:
         """Bytes of one data frame."""
@@ -336,11 +262,6 @@ class SelspotDecoder:
     def frame_bytes_accepted(self) -> int:
         """Bytes of all good frames (data and event) so far."""
         return self._frames.frame_bytes_accepted
-
-    @property
-    def restarts(self) -> int:
-        """Streams restarted without :meth:`mark_discontinuity` (counters went back)."""
-        return self._tracker.restarts
 
     def _mismatch(self, bad: npt.NDArray[Any]) -> None:
         """Count frames whose own header contradicts the configuration; log the first."""

@@ -28,20 +28,22 @@ FrameBlock layout of a ``timer`` stream (``E`` slots):
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.core.ticks import unwrap_counter
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
+from spotlab.drivers.mcs1.framing import FrameBatch, FrameDecoder
 from spotlab.drivers.mcs1.metadata import recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.mcs1.version import VersionReply
 from spotlab.drivers.timer.config import RECORD_BYTES, TimerConfig
 
 log = logging.getLogger(__name__)
@@ -104,8 +106,11 @@ def frame_dtype(n_slots: int) -> np.dtype[Any]:
 
 
 @dataclass(frozen=True)
-class TimerVersion:
+class TimerVersion(VersionReply):
     """What a TMR unit says of itself in reply to ``VER:0`` (timer.md §2)."""
+
+    code = FAMILY_CODE
+    form = "<inputs> <outputs> <tick Hz>"
 
     firmware: str
     serial_number: str
@@ -113,10 +118,6 @@ class TimerVersion:
     outputs: int
     tick_hz: int
     text: str
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-        return asdict(self)
 
 
 def parse_version(text: str) -> TimerVersion:
@@ -127,20 +128,10 @@ def parse_version(text: str) -> TimerVersion:
     ProtocolError
         If it is not a TMR version reply of that form.
     """
-    fields = text.split()
-    try:
-        if len(fields) < 6 or fields[0] != FAMILY_CODE:
-            raise ValueError(text)
-        return TimerVersion(
-            fields[1], fields[2], int(fields[3]), int(fields[4]), int(fields[5]), text
-        )
-    except ValueError as exc:
-        raise ProtocolError(
-            f"VER:0 reply {text!r} is not 'TMR <firmware> <serial> <inputs> <outputs> <tick Hz>'"
-        ) from exc
+    return TimerVersion.parse(text)
 
 
-class TimerDecoder:
+class TimerDecoder(Mcs1StreamDecoder):
     """Bytes of a TMR link in, :class:`FrameBlock` out (a ``StreamDecoder``).
 
     Parameters
@@ -200,50 +191,11 @@ class TimerDecoder:
             config = TimerConfig.from_dict(config)
         return cls(config.slots, stats=stats, frame_period_us=1e9 / config.rate_mhz)
 
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered) received at host ``arrival_ns``."""
-        self.stats.bytes += len(data)
-        return self._decode(self._frames.feed(data, arrival_ns))
-
-    def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay); stamps stay per read."""
-        chunks = list(chunks)
-        self.stats.bytes += sum(len(data) for data, _ in chunks)
-        return self._decode(self._frames.feed_many(chunks))
-
-    def flush(self) -> FrameBlock:
-        """End of input: resolve the bytes still buffered."""
-        return self._decode(self._frames.flush())
-
     def mark_discontinuity(self) -> None:
         """The link was broken or the stream restarted: counters (and edge counts) from 0."""
-        self._frames.discard()
-        self._tracker.mark_discontinuity()
+        super().mark_discontinuity()
         self._counts.clear()
         self._lost_last = None
-
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
-        return self._frames.take_events()
-
-    @property
-    def banner_seen(self) -> bool:
-        """Whether the reset banner appeared between frames (the device reset itself)."""
-        return self._frames.banner_seen
-
-    @banner_seen.setter
-    def banner_seen(self, value: bool) -> None:
-        self._frames.banner_seen = value
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded or discarded."""
-        return self._frames.buffered
-
-    @property
-    def restarts(self) -> int:
-        """Streams restarted without :meth:`mark_discontinuity`."""
-        return self._tracker.restarts
 
     def _empty(self) -> FrameBlock:
         return FrameBlock.empty(self.slots + 1, 1, len(VALUES))
