@@ -73,6 +73,10 @@ class CentroidDriver(FamilyDriver[CentroidConfig, CentroidDecoder, CentroidVersi
         "RATE": "rate_hz", "CAMS": "camera_mask", "EXPO": "exposure_us",
         "THRS": "threshold", "BLOB": "max_blobs",
     }  # fmt: skip
+    stream_kind = "blobs2d"
+    stream_tick_hz = float(TICK_HZ)
+    values = VALUES
+    units = UNITS
     info_fields = ("firmware", "cameras")
 
     def __init__(
@@ -94,31 +98,14 @@ class CentroidDriver(FamilyDriver[CentroidConfig, CentroidDecoder, CentroidVersi
             "cameras": cameras, "camera_mask": camera_mask, "rate_hz": rate_hz,
             "exposure_us": exposure_us, "threshold": threshold, "max_blobs": max_blobs,
         }  # fmt: skip
-        super().__init__(
-            port,
-            name=name,
-            given=given,
-            fixed={"baud": baud},
-            reply_timeout=reply_timeout,
-            reconnect_timeout=reconnect_timeout,
-        )
+        fixed = {"baud": baud}
+        super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     @property
     def spec(self) -> StreamSpec:
         """The stream: ``blobs2d``, camera columns, hub ticks in µs (layout: protocol.py)."""
         c = self.config
-        return StreamSpec(
-            name=self.name,
-            kind="blobs2d",
-            n_sensors=c.n_columns,
-            n_markers=c.max_blobs + 1,
-            rate_hz=c.rate_hz,
-            tick_hz=float(TICK_HZ),
-            slot_period_s=None,
-            values=VALUES,
-            units=UNITS,
-            metadata={"config": c.to_dict(), "layout": "cen-blobs-v1"},
-        )
+        return self._spec(c.n_columns, c.max_blobs + 1, layout="cen-blobs-v1")
 
     # -- family hooks ----------------------------------------------------------------
     def _unasked(self) -> list[str]:

@@ -40,7 +40,7 @@ from spotlab.drivers.centroid.config import CentroidConfig
 from spotlab.drivers.centroid.framing import VariableFrameDecoder
 from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
 from spotlab.drivers.mcs1.framing import FrameBatch
-from spotlab.drivers.mcs1.metadata import recorded_config
+from spotlab.drivers.mcs1.metadata import as_config, recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
 from spotlab.drivers.mcs1.version import VersionReply
 
@@ -94,15 +94,8 @@ class CentroidVersion(VersionReply):
     text: str
 
 
-def parse_version(text: str) -> CentroidVersion:
-    """Parse a ``VER:0`` reply such as ``"CEN 1.0 SIM00091 8 1024 1000000"``.
-
-    Raises
-    ------
-    ProtocolError
-        If it is not a CEN version reply of that form.
-    """
-    return CentroidVersion.parse(text)
+#: Parse a ``VER:0`` reply text (``ProtocolError`` if it is not the family's).
+parse_version = CentroidVersion.parse
 
 
 class CentroidDecoder(Mcs1StreamDecoder):
@@ -153,8 +146,7 @@ class CentroidDecoder(Mcs1StreamDecoder):
         cls, config: CentroidConfig | Mapping[str, Any], *, stats: LinkStats | None = None
     ) -> CentroidDecoder:
         """A decoder for a configuration (a :class:`CentroidConfig` or its ``to_dict()``)."""
-        if not isinstance(config, CentroidConfig):
-            config = CentroidConfig.from_dict(config)
+        config = as_config(config, CentroidConfig)
         return cls(config, stats=stats)
 
     def summary(self) -> dict[str, Any]:
@@ -277,15 +269,8 @@ class CentroidDecoder(Mcs1StreamDecoder):
 def decoder_from_metadata(meta: Mapping[str, Any]) -> CentroidDecoder:
     """Rebuild the decoder of a recorded CEN stream.
 
-    Parameters
-    ----------
-    meta : mapping
-        :meth:`CentroidDriver.metadata`, the stream's ``StreamSpec.to_dict()``, or a
-        configuration dictionary (``CentroidConfig.to_dict()``).
-
-    Raises
-    ------
-    ConfigurationError
-        If the metadata belongs to another family or holds no CEN configuration.
+    ``meta`` is :meth:`CentroidDriver.metadata`, the stream's ``StreamSpec.to_dict()`` or the
+    configuration's ``to_dict()`` (:func:`~spotlab.drivers.mcs1.metadata.recorded_config`,
+    which raises ``ConfigurationError`` for another family's).
     """
     return CentroidDecoder.from_config(recorded_config(meta, "centroid", "CEN", ("camera_mask",)))

@@ -11,12 +11,44 @@ a :class:`FrameBlock` (its payload layout).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
 
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+
+#: The MCS-1 frame header and data-frame prefix (mcs1.md §2, §4): ``(name, format, offset)``.
+PREFIX_FIELDS: tuple[tuple[str, Any, int], ...] = (
+    ("sync", "<u2", 0),
+    ("type", "u1", 2),
+    ("version", "u1", 3),
+    ("seq", "<u2", 4),
+    ("len", "<u2", 6),
+    ("hcrc", "<u2", 8),
+    ("frame_no", "<u4", 10),
+    ("tick", "<u4", 14),
+    ("status", "<u2", 18),
+    ("n_items", "<u2", 20),
+)
+
+
+def packed_dtype(fields: Sequence[tuple[str, Any, int]], itemsize: int) -> np.dtype[Any]:
+    """A structured dtype of ``(name, format, offset)`` fields, ``itemsize`` bytes a frame.
+
+    Fields may overlap (views of the same bytes under another name).
+    """
+    return np.dtype(
+        {
+            "names": [f[0] for f in fields],
+            "formats": [f[1] for f in fields],
+            "offsets": [f[2] for f in fields],
+            "itemsize": itemsize,
+        }
+    )
 
 
 class Mcs1StreamDecoder(ABC):
@@ -61,17 +93,9 @@ class Mcs1StreamDecoder(ABC):
         return self._decode(self._frames.feed(data, arrival_ns))
 
     def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay of a journal); stamps stay per read.
+        """Decode several reads (``(data, arrival_ns)`` in read order) in one pass (replay).
 
-        Parameters
-        ----------
-        chunks : iterable of (bytes-like, int)
-            ``(data, arrival_ns)`` in the order they were read.
-
-        Returns
-        -------
-        FrameBlock
-            The same frames as feeding the chunks one by one, at bulk speed.
+        The same frames as feeding the chunks one by one, at bulk speed; stamps stay per read.
         """
         chunks = list(chunks)
         self.stats.bytes += sum(len(data) for data, _ in chunks)

@@ -14,7 +14,9 @@ hooks written once from a few class attributes:
   (``RATE`` is in mHz and becomes ``rate_hz``);
 * ``info_fields`` — the ``VER:0`` fields :meth:`detect` reports in ``DeviceInfo.extra``.
 
-The family keeps what is its own: its ``__init__`` keywords, ``spec``, the
+The family keeps what is its own: its ``__init__`` keywords, ``spec`` (through
+:meth:`FamilyDriver._spec`, with ``stream_kind``, ``stream_tick_hz``, ``values``
+and ``units``), the
 checks of :meth:`FamilyDriver._check_version`, :meth:`Mcs1Driver._describe_load`,
 the ``CONF`` fields that are not one integer (:meth:`FamilyDriver._conf_extras`)
 and its commands (``TimerDriver.pulse``).
@@ -28,6 +30,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, Generic, TypeVar
 
 from spotlab.core.errors import ProtocolError
+from spotlab.core.streams import StreamKind, StreamSpec
 from spotlab.drivers.base import DeviceInfo
 from spotlab.drivers.mcs1 import discovery
 from spotlab.drivers.mcs1.commands import Reply
@@ -70,6 +73,11 @@ class FamilyDriver(Mcs1Driver, Generic[ConfigT, DecoderT, VersionT]):
     conf_verbs: ClassVar[Mapping[str, str]] = {}
     #: ``VER:0`` fields reported in ``DeviceInfo.extra``, in this order.
     info_fields: ClassVar[tuple[str, ...]] = ("firmware",)
+    #: The stream's kind, tick rate (Hz), value names and units (:class:`StreamSpec`).
+    stream_kind: ClassVar[StreamKind]
+    stream_tick_hz: ClassVar[float]
+    values: ClassVar[tuple[str, ...]]
+    units: ClassVar[tuple[str, ...]]
 
     config: ConfigT
     _decoder: DecoderT
@@ -79,7 +87,6 @@ class FamilyDriver(Mcs1Driver, Generic[ConfigT, DecoderT, VersionT]):
     def __init__(
         self,
         port: str | os.PathLike[str],
-        *,
         name: str | None,
         given: Mapping[str, Any],
         fixed: Mapping[str, Any],
@@ -97,6 +104,23 @@ class FamilyDriver(Mcs1Driver, Generic[ConfigT, DecoderT, VersionT]):
     def decoder(self) -> DecoderT:
         """The decoder fed by this driver (its ``stats`` are the driver's)."""
         return self._decoder
+
+    def _spec(
+        self, n_sensors: int, n_markers: int, slot_period_s: float | None = None, **extra: Any
+    ) -> StreamSpec:
+        """The stream of the current configuration; ``extra`` joins ``config`` in its metadata."""
+        return StreamSpec(
+            name=self.name,
+            kind=self.stream_kind,
+            n_sensors=n_sensors,
+            n_markers=n_markers,
+            rate_hz=self.config.rate_hz,
+            tick_hz=self.stream_tick_hz,
+            slot_period_s=slot_period_s,
+            values=self.values,
+            units=self.units,
+            metadata={"config": self.config.to_dict(), **extra},
+        )
 
     def _new_decoder(self, config: ConfigT) -> DecoderT:
         decoder: DecoderT = self.decoder_class.from_config(config, stats=self.stats)

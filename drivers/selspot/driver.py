@@ -95,6 +95,10 @@ class SelspotDriver(FamilyDriver[SelspotConfig, SelspotDecoder, DeviceVersion]):
         "SLOT": "slot_us",
         "BGND": "bgnd",
     }
+    stream_kind = "image2d"
+    stream_tick_hz = 1e6
+    values = VALUES
+    units = UNITS
     info_fields = ("firmware", "max_cameras", "max_leds")
 
     def __init__(
@@ -114,32 +118,16 @@ class SelspotDriver(FamilyDriver[SelspotConfig, SelspotDecoder, DeviceVersion]):
     ) -> None:
         given = {"cameras": cameras, "leds": leds, "rate_hz": rate_hz, "slot_us": slot_us,
                  "bgnd": bgnd}  # fmt: skip
-        super().__init__(
-            port,
-            name=name,
-            given=given,
-            fixed={"agc": agc, "baud": baud},
-            reply_timeout=reply_timeout,
-            reconnect_timeout=reconnect_timeout,
-        )
+        fixed = {"agc": agc, "baud": baud}
+        super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     # -- description ---------------------------------------------------------------
     @property
     def spec(self) -> StreamSpec:
         """The stream: ``image2d``, cameras x LEDs, x/y/intensity in detector counts."""
         c = self.config
-        return StreamSpec(
-            name=self.name,
-            kind="image2d",
-            n_sensors=c.cameras,
-            n_markers=c.n_leds,
-            rate_hz=c.rate_hz,
-            tick_hz=1e6,
-            slot_period_s=c.slot_us * 1e-6,
-            values=VALUES,
-            units=UNITS,
-            metadata={"config": c.to_dict(), "led_ids": [led for led, _ in c.leds]},
-        )
+        led_ids = [led for led, _ in c.leds]
+        return self._spec(c.cameras, c.n_leds, c.slot_us * 1e-6, led_ids=led_ids)
 
     # -- family hooks ----------------------------------------------------------------
     def _conf_extras(self, fields: Mapping[str, str], out: dict[str, Any]) -> None:

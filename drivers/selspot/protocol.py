@@ -21,9 +21,9 @@ import numpy.typing as npt
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
-from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
+from spotlab.drivers.mcs1.decoding import PREFIX_FIELDS, Mcs1StreamDecoder, packed_dtype
 from spotlab.drivers.mcs1.framing import FrameBatch, FrameDecoder
-from spotlab.drivers.mcs1.metadata import recorded_config
+from spotlab.drivers.mcs1.metadata import as_config, recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
 from spotlab.drivers.mcs1.version import VersionReply
 from spotlab.drivers.selspot.config import SelspotConfig, led_table
@@ -70,16 +70,7 @@ def frame_dtype(n_records: int) -> np.dtype[Any]:
         SPX header for a quick check of the whole layout.
     """
     fields = [
-        ("sync", "<u2", 0),
-        ("type", "u1", 2),
-        ("version", "u1", 3),
-        ("seq", "<u2", 4),
-        ("len", "<u2", 6),
-        ("hcrc", "<u2", 8),
-        ("frame_no", "<u4", 10),
-        ("tick", "<u4", 14),
-        ("status", "<u2", 18),
-        ("n_items", "<u2", 20),
+        *PREFIX_FIELDS,
         ("slot_us", "<u2", 22),
         ("n_leds", "u1", 24),
         ("n_cams", "u1", 25),
@@ -88,14 +79,7 @@ def frame_dtype(n_records: int) -> np.dtype[Any]:
         ("layout_a", "<u4", _LAYOUT_OFFSET),
         ("layout_b", "<u2", _LAYOUT_OFFSET + 4),
     ]
-    return np.dtype(
-        {
-            "names": [f[0] for f in fields],
-            "formats": [f[1] for f in fields],
-            "offsets": [f[2] for f in fields],
-            "itemsize": 28 + 5 * n_records,
-        }
-    )
+    return packed_dtype(fields, 28 + 5 * n_records)
 
 
 def decode_records(
@@ -166,15 +150,8 @@ class DeviceVersion(VersionReply):
     text: str
 
 
-def parse_version(text: str) -> DeviceVersion:
-    """Parse a ``VER:0`` reply text such as ``"SPX 1.0 SIM00042 4 128"``.
-
-    Raises
-    ------
-    ProtocolError
-        If it is not an SPX version reply of that form; the message shows it.
-    """
-    return DeviceVersion.parse(text)
+#: Parse a ``VER:0`` reply text (``ProtocolError`` if it is not the family's).
+parse_version = DeviceVersion.parse
 
 
 class SelspotDecoder(Mcs1StreamDecoder):
@@ -243,8 +220,7 @@ class SelspotDecoder(Mcs1StreamDecoder):
         cls, config: SelspotConfig | Mapping[str, Any], *, stats: LinkStats | None = None
     ) -> SelspotDecoder:
         """A decoder for a configuration (a :class:`SelspotConfig` or its ``to_dict()``)."""
-        if not isinstance(config, SelspotConfig):
-            config = SelspotConfig.from_dict(config)
+        config = as_config(config, SelspotConfig)
         return cls(
             config.cameras,
             config.leds,
@@ -311,19 +287,8 @@ class SelspotDecoder(Mcs1StreamDecoder):
 def decoder_from_metadata(meta: Mapping[str, Any]) -> SelspotDecoder:
     """Rebuild the decoder of a recorded SPX stream.
 
-    Parameters
-    ----------
-    meta : mapping
-        :meth:`SelspotDriver.metadata`, the stream's ``StreamSpec.to_dict()``, or
-        a configuration dictionary (``SelspotConfig.to_dict()``).
-
-    Returns
-    -------
-    SelspotDecoder
-
-    Raises
-    ------
-    ConfigurationError
-        If the metadata belongs to another family or holds no SPX configuration.
+    ``meta`` is :meth:`SelspotDriver.metadata`, the stream's ``StreamSpec.to_dict()`` or the
+    configuration's ``to_dict()`` (:func:`~spotlab.drivers.mcs1.metadata.recorded_config`,
+    which raises ``ConfigurationError`` for another family's).
     """
     return SelspotDecoder.from_config(recorded_config(meta, "selspot", "SPX", ("cameras", "leds")))

@@ -70,6 +70,10 @@ class TimerDriver(FamilyDriver[TimerConfig, TimerDecoder, TimerVersion]):
     version_class = TimerVersion
     device_keys = ("rate_hz", "slots", "timecode")
     conf_verbs: ClassVar[Mapping[str, str]] = {"RATE": "rate_hz", "EDGS": "slots"}
+    stream_kind = "timer"
+    stream_tick_hz = float(TICK_HZ)
+    values = VALUES
+    units = UNITS
     info_fields = ("firmware", "inputs")
 
     def __init__(
@@ -85,31 +89,14 @@ class TimerDriver(FamilyDriver[TimerConfig, TimerDecoder, TimerVersion]):
         reply_timeout: float = 1.0,
         reconnect_timeout: float | None = None,
     ) -> None:
-        super().__init__(
-            port,
-            name=name,
-            given={"rate_hz": rate_hz, "slots": slots, "timecode": timecode},
-            fixed={"inputs": inputs, "baud": baud},
-            reply_timeout=reply_timeout,
-            reconnect_timeout=reconnect_timeout,
-        )
+        given = {"rate_hz": rate_hz, "slots": slots, "timecode": timecode}
+        fixed = {"inputs": inputs, "baud": baud}
+        super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     @property
     def spec(self) -> StreamSpec:
         """The stream: ``timer``, ``E + 1`` rows (edge slots, then timecode), 10 MHz ticks."""
-        c = self.config
-        return StreamSpec(
-            name=self.name,
-            kind="timer",
-            n_sensors=1,
-            n_markers=c.slots + 1,
-            rate_hz=c.rate_hz,
-            tick_hz=float(TICK_HZ),
-            slot_period_s=None,
-            values=VALUES,
-            units=UNITS,
-            metadata={"config": c.to_dict(), "layout": "timer-edges-v1"},
-        )
+        return self._spec(1, self.config.slots + 1, layout="timer-edges-v1")
 
     def pulse(self, output: int) -> int:
         """Fire one pulse on ``output`` (0-3); returns the counter at the pulse (10 MHz ticks).

@@ -39,9 +39,9 @@ from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.core.ticks import unwrap_counter
-from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
+from spotlab.drivers.mcs1.decoding import PREFIX_FIELDS, Mcs1StreamDecoder, packed_dtype
 from spotlab.drivers.mcs1.framing import FrameBatch, FrameDecoder
-from spotlab.drivers.mcs1.metadata import recorded_config
+from spotlab.drivers.mcs1.metadata import as_config, recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
 from spotlab.drivers.mcs1.version import VersionReply
 from spotlab.drivers.timer.config import RECORD_BYTES, TimerConfig
@@ -75,16 +75,7 @@ def frame_dtype(n_slots: int) -> np.dtype[Any]:
         (n_slots,) of :data:`RECORD_DTYPE`.
     """
     fields: list[tuple[str, Any, int]] = [
-        ("sync", "<u2", 0),
-        ("type", "u1", 2),
-        ("version", "u1", 3),
-        ("seq", "<u2", 4),
-        ("len", "<u2", 6),
-        ("hcrc", "<u2", 8),
-        ("frame_no", "<u4", 10),
-        ("tick", "<u4", 14),
-        ("status", "<u2", 18),
-        ("n_items", "<u2", 20),
+        *PREFIX_FIELDS,
         ("counter", "<i8", 22),
         ("armed", "<u2", 30),
         ("edges_lost", "<u2", 32),
@@ -95,14 +86,7 @@ def frame_dtype(n_slots: int) -> np.dtype[Any]:
         ("records", (RECORD_DTYPE, (n_slots,)), 42),
         ("pcrc", "<u2", 42 + RECORD_BYTES * n_slots),
     ]
-    return np.dtype(
-        {
-            "names": [f[0] for f in fields],
-            "formats": [f[1] for f in fields],
-            "offsets": [f[2] for f in fields],
-            "itemsize": 44 + RECORD_BYTES * n_slots,
-        }
-    )
+    return packed_dtype(fields, 44 + RECORD_BYTES * n_slots)
 
 
 @dataclass(frozen=True)
@@ -120,15 +104,8 @@ class TimerVersion(VersionReply):
     text: str
 
 
-def parse_version(text: str) -> TimerVersion:
-    """Parse a ``VER:0`` reply text such as ``"TMR 1.0 SIM00077 8 4 10000000"``.
-
-    Raises
-    ------
-    ProtocolError
-        If it is not a TMR version reply of that form.
-    """
-    return TimerVersion.parse(text)
+#: Parse a ``VER:0`` reply text (``ProtocolError`` if it is not the family's).
+parse_version = TimerVersion.parse
 
 
 class TimerDecoder(Mcs1StreamDecoder):
@@ -187,8 +164,7 @@ class TimerDecoder(Mcs1StreamDecoder):
         cls, config: TimerConfig | Mapping[str, Any], *, stats: LinkStats | None = None
     ) -> TimerDecoder:
         """A decoder for a configuration (a :class:`TimerConfig` or its ``to_dict()``)."""
-        if not isinstance(config, TimerConfig):
-            config = TimerConfig.from_dict(config)
+        config = as_config(config, TimerConfig)
         return cls(config.slots, stats=stats, frame_period_us=1e9 / config.rate_mhz)
 
     def mark_discontinuity(self) -> None:
@@ -282,15 +258,8 @@ class TimerDecoder(Mcs1StreamDecoder):
 def decoder_from_metadata(meta: Mapping[str, Any]) -> TimerDecoder:
     """Rebuild the decoder of a recorded TMR stream.
 
-    Parameters
-    ----------
-    meta : mapping
-        :meth:`TimerDriver.metadata`, the stream's ``StreamSpec.to_dict()``, or a
-        configuration dictionary (``TimerConfig.to_dict()``).
-
-    Raises
-    ------
-    ConfigurationError
-        If the metadata belongs to another family or holds no TMR configuration.
+    ``meta`` is :meth:`TimerDriver.metadata`, the stream's ``StreamSpec.to_dict()`` or the
+    configuration's ``to_dict()`` (:func:`~spotlab.drivers.mcs1.metadata.recorded_config`,
+    which raises ``ConfigurationError`` for another family's).
     """
     return TimerDecoder.from_config(recorded_config(meta, "timer", "TMR", ("slots",)))
