@@ -16,6 +16,7 @@ from typing import Any
 
 from spotlab.core.errors import BandwidthError, ConfigurationError
 from spotlab.drivers.mcs1.commands import BAUD_CODES
+from spotlab.drivers.mcs1.load import LineLoad
 
 MAX_CAMERAS = 16
 MAX_BLOBS = 1024
@@ -30,7 +31,7 @@ NOMINAL_BLOBS = 40
 
 
 @dataclass(frozen=True)
-class CentroidConfig:
+class CentroidConfig(LineLoad):
     """What a CEN hub is told before ``START:``.
 
     Parameters
@@ -119,11 +120,6 @@ class CentroidConfig:
         )  # fmt: skip
         base.bandwidth_check()
         return base
-
-    @property
-    def rate_hz(self) -> float:
-        """Frame rate in Hz."""
-        return self.rate_mhz / 1000
 
     @property
     def cameras(self) -> tuple[int, ...]:

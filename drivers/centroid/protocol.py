@@ -27,21 +27,22 @@ blobs one camera sent in the block; ``B`` varies from block to block, use
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ProtocolError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.drivers.centroid.config import CentroidConfig
 from spotlab.drivers.centroid.framing import VariableFrameDecoder
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch
-from spotlab.drivers.mcs1.metadata import recorded_config
+from spotlab.drivers.mcs1.decoding import Mcs1StreamDecoder
+from spotlab.drivers.mcs1.framing import FrameBatch
+from spotlab.drivers.mcs1.metadata import as_config, recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.mcs1.version import VersionReply
 
 log = logging.getLogger(__name__)
 
@@ -79,8 +80,11 @@ _HUB_END = 30  # header (10) + hub header (20)
 
 
 @dataclass(frozen=True)
-class CentroidVersion:
+class CentroidVersion(VersionReply):
     """What a CEN hub says of itself in reply to ``VER:0`` (centroid.md §2)."""
+
+    code = FAMILY_CODE
+    form = "<cameras> <max blobs> <camera tick Hz>"
 
     firmware: str
     serial_number: str
@@ -89,34 +93,12 @@ class CentroidVersion:
     tick_hz: int
     text: str
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-        return asdict(self)
+
+#: Parse a ``VER:0`` reply text (``ProtocolError`` if it is not the family's).
+parse_version = CentroidVersion.parse
 
 
-def parse_version(text: str) -> CentroidVersion:
-    """Parse a ``VER:0`` reply such as ``"CEN 1.0 SIM00091 8 1024 1000000"``.
-
-    Raises
-    ------
-    ProtocolError
-        If it is not a CEN version reply of that form.
-    """
-    fields = text.split()
-    try:
-        if len(fields) < 6 or fields[0] != FAMILY_CODE:
-            raise ValueError(text)
-        return CentroidVersion(
-            fields[1], fields[2], int(fields[3]), int(fields[4]), int(fields[5]), text
-        )
-    except ValueError as exc:
-        raise ProtocolError(
-            f"VER:0 reply {text!r} is not 'CEN <firmware> <serial> <cameras> <max blobs> "
-            "<camera tick Hz>'"
-        ) from exc
-
-
-class CentroidDecoder:
+class CentroidDecoder(Mcs1StreamDecoder):
     """Bytes of a CEN link in, :class:`FrameBlock` out (a ``StreamDecoder``).
 
     Parameters
@@ -164,47 +146,8 @@ class CentroidDecoder:
         cls, config: CentroidConfig | Mapping[str, Any], *, stats: LinkStats | None = None
     ) -> CentroidDecoder:
         """A decoder for a configuration (a :class:`CentroidConfig` or its ``to_dict()``)."""
-        if not isinstance(config, CentroidConfig):
-            config = CentroidConfig.from_dict(config)
+        config = as_config(config, CentroidConfig)
         return cls(config, stats=stats)
-
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered) received at host ``arrival_ns``."""
-        self.stats.bytes += len(data)
-        return self._decode(self._frames.feed(data, arrival_ns))
-
-    def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay); stamps stay per read."""
-        chunks = list(chunks)
-        self.stats.bytes += sum(len(data) for data, _ in chunks)
-        return self._decode(self._frames.feed_many(chunks))
-
-    def flush(self) -> FrameBlock:
-        """End of input: resolve the bytes still buffered."""
-        return self._decode(self._frames.flush())
-
-    def mark_discontinuity(self) -> None:
-        """The link was broken or the stream restarted."""
-        self._frames.discard()
-        self._tracker.mark_discontinuity()
-
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
-        return self._frames.take_events()
-
-    @property
-    def banner_seen(self) -> bool:
-        """Whether the reset banner appeared between frames (the device reset itself)."""
-        return self._frames.banner_seen
-
-    @banner_seen.setter
-    def banner_seen(self, value: bool) -> None:
-        self._frames.banner_seen = value
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded or discarded."""
-        return self._frames.buffered
 
     def summary(self) -> dict[str, Any]:
         """Blob counts for ``spotlab info``: blobs per frame, overflows and gaps per camera."""
@@ -326,15 +269,8 @@ class CentroidDecoder:
 def decoder_from_metadata(meta: Mapping[str, Any]) -> CentroidDecoder:
     """Rebuild the decoder of a recorded CEN stream.
 
-    Parameters
-    ----------
-    meta : mapping
-        :meth:`CentroidDriver.metadata`, the stream's ``StreamSpec.to_dict()``, or a
-        configuration dictionary (``CentroidConfig.to_dict()``).
-
-    Raises
-    ------
-    ConfigurationError
-        If the metadata belongs to another family or holds no CEN configuration.
+    ``meta`` is :meth:`CentroidDriver.metadata`, the stream's ``StreamSpec.to_dict()`` or the
+    configuration's ``to_dict()`` (:func:`~spotlab.drivers.mcs1.metadata.recorded_config`,
+    which raises ``ConfigurationError`` for another family's).
     """
     return CentroidDecoder.from_config(recorded_config(meta, "centroid", "CEN", ("camera_mask",)))

@@ -14,22 +14,18 @@ needed, resets, renegotiates, reconfigures and restarts, marks the discontinuity
 in the decoder, counts a reconnect and a gap, and tells the taps
 (``disconnected`` / ``device_reset``, then ``reconnected``).
 
-A family (``drivers/selspot``, ``drivers/timer``) provides its configuration
-(:class:`Mcs1Config`), its decoder (:class:`Mcs1Decoder`), ``family_code``,
-:meth:`Mcs1Driver._check_device`, :meth:`Mcs1Driver._describe_load` and
-:meth:`Mcs1Driver._device_info`.
+A family provides its configuration and decoder (``contracts``), ``family_code``
+and the hooks; :class:`~spotlab.drivers.mcs1.family.FamilyDriver` writes most
+of them once (``drivers/selspot``, ``drivers/timer``, ``drivers/centroid``).
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import time
 from abc import abstractmethod
-from collections.abc import Iterable, Mapping
-from typing import Any, ClassVar, Protocol
-
-from serial.tools import list_ports
+from collections.abc import Mapping
+from typing import Any, ClassVar
 
 from spotlab.core.errors import (
     ConfigurationError,
@@ -39,9 +35,8 @@ from spotlab.core.errors import (
     ProtocolError,
 )
 from spotlab.core.frames import FrameBlock
-from spotlab.core.stats import LinkStats
 from spotlab.core.wire import LinkEventKind
-from spotlab.drivers.base import DeviceInfo, Driver
+from spotlab.drivers.base import Driver
 from spotlab.drivers.mcs1.commands import (
     BAUD_CODES,
     RESET_BAUD,
@@ -51,7 +46,7 @@ from spotlab.drivers.mcs1.commands import (
     parse_conf,
     parse_reply,
 )
-from spotlab.drivers.mcs1.framing import EventFrame
+from spotlab.drivers.mcs1.contracts import Mcs1Config, Mcs1Decoder
 from spotlab.drivers.mcs1.link import SerialLink
 from spotlab.drivers.mcs1.session import CommandChannel
 
@@ -71,55 +66,6 @@ MIN_FRAME_WINDOW = 1 << 16
 REPLY_BEHIND_DATA = 5
 #: Faults after which the driver tries to recover instead of raising.
 _TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
-
-
-class Mcs1Config(Protocol):
-    """What the state machine needs of a family's configuration."""
-
-    @property
-    def baud(self) -> int:
-        """Line rate while streaming."""
-
-    @property
-    def rate_hz(self) -> float:
-        """Frame rate in Hz."""
-
-    @property
-    def frame_bytes(self) -> int:
-        """Bytes of one data frame."""
-
-    @property
-    def line_bits_per_s(self) -> float:
-        """Bits per second the stream occupies on the line."""
-
-    def commands(self) -> list[tuple[str, str]]:
-        """``(verb, args)`` of the configuration commands, in the order to send them."""
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-
-
-class Mcs1Decoder(Protocol):
-    """What the state machine needs of a family's stream decoder."""
-
-    stats: LinkStats
-    banner_seen: bool
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded."""
-
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode received bytes."""
-
-    def flush(self) -> FrameBlock:
-        """Resolve the bytes still buffered."""
-
-    def mark_discontinuity(self) -> None:
-        """The link was broken: drop buffered bytes, restart the counters."""
-
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
 
 
 class Mcs1Driver(Driver):
@@ -203,17 +149,17 @@ class Mcs1Driver(Driver):
         self._garbage_bytes = 2 * max(config.frame_bytes, MIN_FRAME_WINDOW)
 
     # -- settings the user did not give: the device's own (CONF:) ---------------------
+    @abstractmethod
     def _unasked(self) -> list[str]:
-        """Settings the user left to the device (the family lists them); none by default."""
-        return []
+        """Settings the user left to the device (``create`` keywords); none: no ``CONF:``."""
 
+    @abstractmethod
     def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
-        """The family's ``create`` keywords from a ``CONF`` reply's fields (family hook)."""
-        return {}
+        """The family's ``create`` keywords from a ``CONF`` reply's fields."""
 
+    @abstractmethod
     def _rebuild(self, device: Mapping[str, Any]) -> tuple[Mcs1Config, Mcs1Decoder]:
         """Configuration and decoder from the device's settings overlaid by the user's."""
-        raise NotImplementedError
 
     def _adopt_device_config(self) -> None:
         """Read the device's configuration (``CONF:``) and keep it for every setting the
@@ -251,11 +197,6 @@ class Mcs1Driver(Driver):
     @abstractmethod
     def _describe_load(self) -> str:
         """What the configuration asks of the line, for the bandwidth message."""
-
-    @classmethod
-    @abstractmethod
-    def _device_info(cls, port: str, text: str) -> DeviceInfo:
-        """A :class:`DeviceInfo` from a ``VER:0`` reply text (raises ``ProtocolError``)."""
 
     @property
     def recovering(self) -> bool:
@@ -537,55 +478,3 @@ class Mcs1Driver(Driver):
         log.warning("%s: streaming again after %.2f s", self.port, outage)
         self._recovering = None
         return True
-
-    # -- discovery -----------------------------------------------------------------
-    @classmethod
-    def detect(
-        cls, ports: Iterable[str | os.PathLike[str]] | None = None, timeout: float = 0.3
-    ) -> list[DeviceInfo]:
-        """Devices of this family answering on this machine's serial ports.
-
-        Parameters
-        ----------
-        ports : iterable of str, optional
-            Ports or URLs to probe; by default every serial port the OS lists
-            with hardware behind it (ports whose hardware id is ``n/a``, such
-            as unused built-in ``ttyS`` ports, are skipped).
-        timeout : float
-            Seconds to wait for each port's reset banner and reply.
-
-        Returns
-        -------
-        list of DeviceInfo
-            One per device that answered ``VER:0`` with the family's code. Each probed device
-            is left reset (9600 baud, not streaming). Ports that cannot be
-            opened (busy, no permission) are skipped.
-        """
-        if ports is None:
-            ports = [p.device for p in list_ports.comports() if p.hwid and p.hwid != "n/a"]
-        found = []
-        for port in ports:
-            info = cls._probe(os.fspath(port), timeout)
-            if info is not None:
-                found.append(info)
-        return found
-
-    @classmethod
-    def _probe(cls, port: str, timeout: float) -> DeviceInfo | None:
-        link = SerialLink(port)
-        try:
-            link.open()
-        except (DeviceError, ConfigurationError) as exc:
-            log.debug("detect: skipping %s: %s", port, exc)
-            return None
-        try:
-            channel = CommandChannel(link, timeout)
-            channel.reset(timeout)
-            reply = channel.transact("VER", "0", data_prefix=cls.family_code)
-            info = cls._device_info(port, reply.text)
-        except (DeviceError, ProtocolError, ConfigurationError) as exc:
-            log.debug("detect: no %s device on %s: %s", cls.family_code, port, exc)
-            return None
-        finally:
-            link.close()
-        return info

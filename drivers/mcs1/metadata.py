@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Protocol, Self, TypeVar
 
 from spotlab.core.errors import ConfigurationError
 
@@ -45,3 +45,19 @@ def recorded_config(
             f"{', '.join(keys)}); keys found: {sorted(meta)}"
         )
     return config
+
+
+class _FromDict(Protocol):
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Self:
+        """The configuration of its ``to_dict()``."""
+
+
+ConfigT = TypeVar("ConfigT", bound=_FromDict)
+
+
+def as_config(config: ConfigT | Mapping[str, Any], config_class: type[ConfigT]) -> ConfigT:
+    """``config`` itself if it is a ``config_class``, else ``config_class.from_dict(config)``."""
+    if isinstance(config, config_class):
+        return config
+    return config_class.from_dict(config)  # type: ignore[arg-type]

@@ -22,6 +22,7 @@ from typing import Any
 
 from spotlab.core.errors import BandwidthError, ConfigurationError
 from spotlab.drivers.mcs1.commands import BAUD_CODES
+from spotlab.drivers.mcs1.load import LineLoad
 
 MAX_CAMERAS = 4
 MAX_LEDS = 128
@@ -74,7 +75,7 @@ def led_table(leds: int | Iterable[int | Sequence[int]]) -> tuple[tuple[int, int
 
 
 @dataclass(frozen=True)
-class SelspotConfig:
+class SelspotConfig(LineLoad):
     """What an SPX system is told before ``START:``.
 
     Parameters
@@ -212,11 +213,6 @@ class SelspotConfig:
         return len(self.leds)
 
     @property
-    def rate_hz(self) -> float:
-        """Frame rate in Hz."""
-        return self.rate_mhz / 1000
-
-    @property
     def payload_len(self) -> int:
         """Bytes of a data frame's payload, ``16 + 5 N C``."""
         return FRAME_FIXED - 12 + RECORD_BYTES * self.n_leds * self.cameras
@@ -225,16 +221,6 @@ class SelspotConfig:
     def frame_bytes(self) -> int:
         """Bytes of a whole data frame, ``28 + 5 N C``."""
         return FRAME_FIXED + RECORD_BYTES * self.n_leds * self.cameras
-
-    @property
-    def line_bits_per_s(self) -> float:
-        """Bits per second the stream occupies on the line (10 bit times a byte)."""
-        return self.rate_mhz * self.frame_bytes * 10 / 1000
-
-    def fits(self, baud: int) -> bool:
-        """Whether the stream fits ``baud`` with 20 % to spare (the ``START:`` check)."""
-        # rate * bytes * 10 <= 0.8 * baud, with rate in mHz: rate_mhz * bytes <= 80 * baud.
-        return self.rate_mhz * self.frame_bytes <= 80 * baud
 
     # -- the START: checks -----------------------------------------------------------
     def timing_check(self) -> None:

@@ -21,13 +21,12 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Iterable, Mapping
-from typing import Any
+from typing import Any, ClassVar
 
-from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.errors import ConfigurationError
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.base import DeviceInfo
 from spotlab.drivers.mcs1.commands import Reply
-from spotlab.drivers.mcs1.driver import Mcs1Driver
+from spotlab.drivers.mcs1.family import FamilyDriver
 from spotlab.drivers.selspot.config import SelspotConfig
 from spotlab.drivers.selspot.protocol import (
     FAMILY_CODE,
@@ -35,17 +34,12 @@ from spotlab.drivers.selspot.protocol import (
     VALUES,
     DeviceVersion,
     SelspotDecoder,
-    parse_version,
 )
 
 log = logging.getLogger(__name__)
 
-#: ``create`` keywords the device keeps when they are not given, by ``CONF`` verb.
-_DEVICE_KEYS_BY_VERB = {"CAMS": "cameras", "RATE": "rate_hz", "SLOT": "slot_us", "BGND": "bgnd"}
-_DEVICE_KEYS = ("cameras", "leds", "rate_hz", "slot_us", "bgnd")
 
-
-class SelspotDriver(Mcs1Driver):
+class SelspotDriver(FamilyDriver[SelspotConfig, SelspotDecoder, DeviceVersion]):
     """Driver of an SPX lateral-photodiode camera system.
 
     Parameters
@@ -91,8 +85,21 @@ class SelspotDriver(Mcs1Driver):
     family = "selspot"
     family_code = FAMILY_CODE
     decoder_path = "spotlab.drivers.selspot:decoder_from_metadata"
-    config: SelspotConfig
-    _decoder: SelspotDecoder
+    config_class = SelspotConfig
+    decoder_class = SelspotDecoder
+    version_class = DeviceVersion
+    device_keys = ("cameras", "leds", "rate_hz", "slot_us", "bgnd")
+    conf_verbs: ClassVar[Mapping[str, str]] = {
+        "CAMS": "cameras",
+        "RATE": "rate_hz",
+        "SLOT": "slot_us",
+        "BGND": "bgnd",
+    }
+    stream_kind = "image2d"
+    stream_tick_hz = 1e6
+    values = VALUES
+    units = UNITS
+    info_fields = ("firmware", "max_cameras", "max_leds")
 
     def __init__(
         self,
@@ -109,96 +116,37 @@ class SelspotDriver(Mcs1Driver):
         reply_timeout: float = 1.0,
         reconnect_timeout: float | None = None,
     ) -> None:
-        super().__init__(port, name=name)
         given = {"cameras": cameras, "leds": leds, "rate_hz": rate_hz, "slot_us": slot_us,
                  "bgnd": bgnd}  # fmt: skip
-        self._asked: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
-        self._fixed: dict[str, Any] = {"agc": agc, "baud": baud}
-        self.config = SelspotConfig.create(**self._asked, **self._fixed)
-        #: What the device said of itself (``VER:0``), once started.
-        self.device: DeviceVersion | None = None
-        self._setup(
-            self.config,
-            SelspotDecoder.from_config(self.config, stats=self.stats),
-            reply_timeout,
-            reconnect_timeout,
-        )
+        fixed = {"agc": agc, "baud": baud}
+        super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     # -- description ---------------------------------------------------------------
     @property
     def spec(self) -> StreamSpec:
         """The stream: ``image2d``, cameras x LEDs, x/y/intensity in detector counts."""
         c = self.config
-        return StreamSpec(
-            name=self.name,
-            kind="image2d",
-            n_sensors=c.cameras,
-            n_markers=c.n_leds,
-            rate_hz=c.rate_hz,
-            tick_hz=1e6,
-            slot_period_s=c.slot_us * 1e-6,
-            values=VALUES,
-            units=UNITS,
-            metadata={"config": c.to_dict(), "led_ids": [led for led, _ in c.leds]},
-        )
-
-    @property
-    def decoder(self) -> SelspotDecoder:
-        """The decoder fed by this driver (its ``stats`` are the driver's)."""
-        return self._decoder
+        led_ids = [led for led, _ in c.leds]
+        return self._spec(c.cameras, c.n_leds, c.slot_us * 1e-6, led_ids=led_ids)
 
     # -- family hooks ----------------------------------------------------------------
-    def _unasked(self) -> list[str]:
-        return [k for k in _DEVICE_KEYS if k not in self._asked]
+    def _conf_extras(self, fields: Mapping[str, str], out: dict[str, Any]) -> None:
+        table = fields.get("LEDT", "")
+        if table:
+            out["leds"] = [
+                (int(table[i : i + 2], 16), int(table[i + 2 : i + 4], 16))
+                for i in range(0, len(table), 4)
+            ]
 
-    def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
-        try:
-            out: dict[str, Any] = {
-                key: int(fields[verb])
-                for verb, key in _DEVICE_KEYS_BY_VERB.items()
-                if verb in fields
-            }
-            if "rate_hz" in out:
-                out["rate_hz"] = out["rate_hz"] / 1000
-            table = fields.get("LEDT", "")
-            if table:
-                out["leds"] = [
-                    (int(table[i : i + 2], 16), int(table[i + 2 : i + 4], 16))
-                    for i in range(0, len(table), 4)
-                ]
-        except ValueError:
-            raise ProtocolError(f"{self.port}: CONF reply {fields} has a malformed value") from None
-        return out
-
-    def _rebuild(self, device: Mapping[str, Any]) -> tuple[SelspotConfig, SelspotDecoder]:
-        config = SelspotConfig.create(**{**device, **self._asked, **self._fixed})
-        return config, SelspotDecoder.from_config(config, stats=self.stats)
-
-    def _check_device(self, reply: Reply) -> None:
+    def _check_version(self, device: DeviceVersion, reply: Reply) -> None:
         c = self.config
-        self.device = parse_version(reply.text)
-        if self.device.max_cameras < c.cameras or self.device.max_leds < c.n_leds:
+        if device.max_cameras < c.cameras or device.max_leds < c.n_leds:
             raise ConfigurationError(
                 f"the device on {self.port} ({reply.text}) supports at most "
-                f"{self.device.max_cameras} cameras and {self.device.max_leds} LEDs; "
+                f"{device.max_cameras} cameras and {device.max_leds} LEDs; "
                 f"configured {c.cameras} cameras and {c.n_leds} LEDs"
             )
 
     def _describe_load(self) -> str:
         c = self.config
         return f"{c.cameras} camera(s) x {c.n_leds} LEDs at {c.rate_hz:g} Hz"
-
-    @classmethod
-    def _device_info(cls, port: str, text: str) -> DeviceInfo:
-        version = parse_version(text)
-        return DeviceInfo(
-            family=cls.family,
-            port=port,
-            description=version.text,
-            serial_number=version.serial_number,
-            extra={
-                "firmware": version.firmware,
-                "max_cameras": version.max_cameras,
-                "max_leds": version.max_leds,
-            },
-        )

@@ -11,19 +11,21 @@ same object decodes a live link and a recording.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
-from spotlab.drivers.mcs1.metadata import recorded_config
+from spotlab.drivers.mcs1.decoding import PREFIX_FIELDS, Mcs1StreamDecoder, packed_dtype
+from spotlab.drivers.mcs1.framing import FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.metadata import as_config, recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.mcs1.version import VersionReply
 from spotlab.drivers.selspot.config import SelspotConfig, led_table
 
 log = logging.getLogger(__name__)
@@ -68,16 +70,7 @@ def frame_dtype(n_records: int) -> np.dtype[Any]:
         SPX header for a quick check of the whole layout.
     """
     fields = [
-        ("sync", "<u2", 0),
-        ("type", "u1", 2),
-        ("version", "u1", 3),
-        ("seq", "<u2", 4),
-        ("len", "<u2", 6),
-        ("hcrc", "<u2", 8),
-        ("frame_no", "<u4", 10),
-        ("tick", "<u4", 14),
-        ("status", "<u2", 18),
-        ("n_items", "<u2", 20),
+        *PREFIX_FIELDS,
         ("slot_us", "<u2", 22),
         ("n_leds", "u1", 24),
         ("n_cams", "u1", 25),
@@ -86,14 +79,7 @@ def frame_dtype(n_records: int) -> np.dtype[Any]:
         ("layout_a", "<u4", _LAYOUT_OFFSET),
         ("layout_b", "<u2", _LAYOUT_OFFSET + 4),
     ]
-    return np.dtype(
-        {
-            "names": [f[0] for f in fields],
-            "formats": [f[1] for f in fields],
-            "offsets": [f[2] for f in fields],
-            "itemsize": 28 + 5 * n_records,
-        }
-    )
+    return packed_dtype(fields, 28 + 5 * n_records)
 
 
 def decode_records(
@@ -139,7 +125,7 @@ def decode_records(
 
 
 @dataclass(frozen=True)
-class DeviceVersion:
+class DeviceVersion(VersionReply):
     """What an SPX device says of itself in reply to ``VER:0`` (selspot.md §2).
 
     Attributes
@@ -154,37 +140,21 @@ class DeviceVersion:
         The whole reply text.
     """
 
+    code = FAMILY_CODE
+    form = "<max cameras> <max LEDs>"
+
     firmware: str
     serial_number: str
     max_cameras: int
     max_leds: int
     text: str
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-        return asdict(self)
+
+#: Parse a ``VER:0`` reply text (``ProtocolError`` if it is not the family's).
+parse_version = DeviceVersion.parse
 
 
-def parse_version(text: str) -> DeviceVersion:
-    """Parse a ``VER:0`` reply text such as ``"SPX 1.0 SIM00042 4 128"``.
-
-    Raises
-    ------
-    ProtocolError
-        If it is not an SPX version reply of that form; the message shows it.
-    """
-    fields = text.split()
-    try:
-        if len(fields) < 5 or fields[0] != FAMILY_CODE:
-            raise ValueError(text)
-        return DeviceVersion(fields[1], fields[2], int(fields[3]), int(fields[4]), text)
-    except ValueError as exc:
-        raise ProtocolError(
-            f"VER:0 reply {text!r} is not 'SPX <firmware> <serial> <max cameras> <max LEDs>'"
-        ) from exc
-
-
-class SelspotDecoder:
+class SelspotDecoder(Mcs1StreamDecoder):
     """Bytes of an SPX link in, :class:`FrameBlock` out (a ``StreamDecoder``).
 
     Parameters
@@ -250,8 +220,7 @@ class SelspotDecoder:
         cls, config: SelspotConfig | Mapping[str, Any], *, stats: LinkStats | None = None
     ) -> SelspotDecoder:
         """A decoder for a configuration (a :class:`SelspotConfig` or its ``to_dict()``)."""
-        if not isinstance(config, SelspotConfig):
-            config = SelspotConfig.from_dict(config)
+        config = as_config(config, SelspotConfig)
         return cls(
             config.cameras,
             config.leds,
@@ -259,73 +228,6 @@ class SelspotDecoder:
             stats=stats,
             frame_period_us=1e9 / config.rate_mhz,
         )
-
-    # -- StreamDecoder ---------------------------------------------------------------
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered).
-
-        Parameters
-        ----------
-        data : bytes-like
-            Bytes as read from the link.
-        arrival_ns : int
-            Host monotonic time of that read in ns.
-
-        Returns
-        -------
-        FrameBlock
-            Frames completed by ``data``: data (F, N, C, 3), flags (F, N, C).
-        """
-        self.stats.bytes += len(data)
-        return self._decode(self._frames.feed(data, arrival_ns))
-
-    def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay of a journal); stamps stay per read.
-
-        Parameters
-        ----------
-        chunks : iterable of (bytes-like, int)
-            ``(data, arrival_ns)`` in the order they were read.
-
-        Returns
-        -------
-        FrameBlock
-            The same frames as feeding the chunks one by one, at bulk speed.
-        """
-        chunks = list(chunks)
-        self.stats.bytes += sum(len(data) for data, _ in chunks)
-        return self._decode(self._frames.feed_many(chunks))
-
-    def flush(self) -> FrameBlock:
-        """End of input, or the link went quiet: resolve the bytes still buffered.
-
-        A frame still waiting for its end is counted as truncated.
-        """
-        return self._decode(self._frames.flush())
-
-    def mark_discontinuity(self) -> None:
-        """The link was broken (reset, reconnect): drop buffered bytes, restart the counters."""
-        self._frames.discard()
-        self._tracker.mark_discontinuity()
-
-    # -- extras --------------------------------------------------------------------------
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
-        return self._frames.take_events()
-
-    @property
-    def banner_seen(self) -> bool:
-        """Whether the reset banner appeared between frames (the device reset itself)."""
-        return self._frames.banner_seen
-
-    @banner_seen.setter
-    def banner_seen(self, value: bool) -> None:
-        self._frames.banner_seen = value
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded or discarded."""
-        return self._frames.buffered
 
     @property
     def frame_bytes(self) -> int:
@@ -336,11 +238,6 @@ class SelspotDecoder:
     def frame_bytes_accepted(self) -> int:
         """Bytes of all good frames (data and event) so far."""
         return self._frames.frame_bytes_accepted
-
-    @property
-    def restarts(self) -> int:
-        """Streams restarted without :meth:`mark_discontinuity` (counters went back)."""
-        return self._tracker.restarts
 
     def _mismatch(self, bad: npt.NDArray[Any]) -> None:
         """Count frames whose own header contradicts the configuration; log the first."""
@@ -390,19 +287,8 @@ class SelspotDecoder:
 def decoder_from_metadata(meta: Mapping[str, Any]) -> SelspotDecoder:
     """Rebuild the decoder of a recorded SPX stream.
 
-    Parameters
-    ----------
-    meta : mapping
-        :meth:`SelspotDriver.metadata`, the stream's ``StreamSpec.to_dict()``, or
-        a configuration dictionary (``SelspotConfig.to_dict()``).
-
-    Returns
-    -------
-    SelspotDecoder
-
-    Raises
-    ------
-    ConfigurationError
-        If the metadata belongs to another family or holds no SPX configuration.
+    ``meta`` is :meth:`SelspotDriver.metadata`, the stream's ``StreamSpec.to_dict()`` or the
+    configuration's ``to_dict()`` (:func:`~spotlab.drivers.mcs1.metadata.recorded_config`,
+    which raises ``ConfigurationError`` for another family's).
     """
     return SelspotDecoder.from_config(recorded_config(meta, "selspot", "SPX", ("cameras", "leds")))

@@ -14,6 +14,7 @@ from typing import Any
 
 from spotlab.core.errors import BandwidthError, ConfigurationError
 from spotlab.drivers.mcs1.commands import BAUD_CODES
+from spotlab.drivers.mcs1.load import LineLoad
 
 MAX_INPUTS = 8
 MAX_SLOTS = 64
@@ -26,7 +27,7 @@ TIMECODE_RATES = ((24, False), (25, False), (30, False), (30, True))
 
 
 @dataclass(frozen=True)
-class TimerConfig:
+class TimerConfig(LineLoad):
     """What a TMR unit is told before ``START:``.
 
     Parameters
@@ -136,11 +137,6 @@ class TimerConfig:
         return base
 
     @property
-    def rate_hz(self) -> float:
-        """Frame rate in Hz."""
-        return self.rate_mhz / 1000
-
-    @property
     def frame_bytes(self) -> int:
         """Bytes of a whole data frame, ``44 + 12 E``."""
         return FRAME_FIXED + RECORD_BYTES * self.slots
@@ -149,15 +145,6 @@ class TimerConfig:
     def payload_len(self) -> int:
         """Bytes of a data frame's payload, ``32 + 12 E``."""
         return self.frame_bytes - 12
-
-    @property
-    def line_bits_per_s(self) -> float:
-        """Bits per second the stream occupies on the line (10 bit times a byte)."""
-        return self.rate_mhz * self.frame_bytes * 10 / 1000
-
-    def fits(self, baud: int) -> bool:
-        """Whether the stream fits ``baud`` with 20 % to spare (the ``START:`` check)."""
-        return self.rate_mhz * self.frame_bytes <= 80 * baud
 
     def bandwidth_check(self) -> None:
         """Raise :class:`BandwidthError` unless the stream fits ``baud`` with 20 % to spare."""

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.base import DeviceInfo
 from spotlab.drivers.mcs1.commands import Reply
-from spotlab.drivers.mcs1.driver import Mcs1Driver
+from spotlab.drivers.mcs1.family import FamilyDriver
 from spotlab.drivers.timer.config import MAX_INPUTS, TimerConfig
 from spotlab.drivers.timer.protocol import (
     FAMILY_CODE,
@@ -25,11 +24,10 @@ from spotlab.drivers.timer.protocol import (
     VALUES,
     TimerDecoder,
     TimerVersion,
-    parse_version,
 )
 
 
-class TimerDriver(Mcs1Driver):
+class TimerDriver(FamilyDriver[TimerConfig, TimerDecoder, TimerVersion]):
     """Driver of a TMR timer/sync unit.
 
     Parameters
@@ -67,8 +65,16 @@ class TimerDriver(Mcs1Driver):
     family = "timer"
     family_code = FAMILY_CODE
     decoder_path = "spotlab.drivers.timer:decoder_from_metadata"
-    config: TimerConfig
-    _decoder: TimerDecoder
+    config_class = TimerConfig
+    decoder_class = TimerDecoder
+    version_class = TimerVersion
+    device_keys = ("rate_hz", "slots", "timecode")
+    conf_verbs: ClassVar[Mapping[str, str]] = {"RATE": "rate_hz", "EDGS": "slots"}
+    stream_kind = "timer"
+    stream_tick_hz = float(TICK_HZ)
+    values = VALUES
+    units = UNITS
+    info_fields = ("firmware", "inputs")
 
     def __init__(
         self,
@@ -83,41 +89,14 @@ class TimerDriver(Mcs1Driver):
         reply_timeout: float = 1.0,
         reconnect_timeout: float | None = None,
     ) -> None:
-        super().__init__(port, name=name)
         given = {"rate_hz": rate_hz, "slots": slots, "timecode": timecode}
-        self._asked: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
-        self._fixed: dict[str, Any] = {"inputs": inputs, "baud": baud}
-        self.config = TimerConfig.create(**self._asked, **self._fixed)
-        #: What the unit said of itself (``VER:0``), once started.
-        self.device: TimerVersion | None = None
-        self._setup(
-            self.config,
-            TimerDecoder.from_config(self.config, stats=self.stats),
-            reply_timeout,
-            reconnect_timeout,
-        )
+        fixed = {"inputs": inputs, "baud": baud}
+        super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     @property
     def spec(self) -> StreamSpec:
         """The stream: ``timer``, ``E + 1`` rows (edge slots, then timecode), 10 MHz ticks."""
-        c = self.config
-        return StreamSpec(
-            name=self.name,
-            kind="timer",
-            n_sensors=1,
-            n_markers=c.slots + 1,
-            rate_hz=c.rate_hz,
-            tick_hz=float(TICK_HZ),
-            slot_period_s=None,
-            values=VALUES,
-            units=UNITS,
-            metadata={"config": c.to_dict(), "layout": "timer-edges-v1"},
-        )
-
-    @property
-    def decoder(self) -> TimerDecoder:
-        """The decoder fed by this driver (its ``stats`` are the driver's)."""
-        return self._decoder
+        return self._spec(1, self.config.slots + 1, layout="timer-edges-v1")
 
     def pulse(self, output: int) -> int:
         """Fire one pulse on ``output`` (0-3); returns the counter at the pulse (10 MHz ticks).
@@ -135,47 +114,19 @@ class TimerDriver(Mcs1Driver):
         return value - (1 << 64) if value >= 1 << 63 else value
 
     # -- family hooks ----------------------------------------------------------------
-    def _unasked(self) -> list[str]:
-        return [k for k in ("rate_hz", "slots", "timecode") if k not in self._asked]
+    def _conf_extras(self, fields: Mapping[str, str], out: dict[str, Any]) -> None:
+        tc = [int(v) for v in fields.get("TCOD", "0").split(",")]
+        if tc[0] == 1 and len(tc) == 3:
+            out["timecode"] = (tc[1], bool(tc[2]))
 
-    def _device_settings(self, fields: Mapping[str, str]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        try:
-            if "RATE" in fields:
-                out["rate_hz"] = int(fields["RATE"]) / 1000
-            if "EDGS" in fields:
-                out["slots"] = int(fields["EDGS"])
-            tc = [int(v) for v in fields.get("TCOD", "0").split(",")]
-            if tc[0] == 1 and len(tc) == 3:
-                out["timecode"] = (tc[1], bool(tc[2]))
-        except ValueError:
-            raise ProtocolError(f"{self.port}: CONF reply {fields} has a malformed value") from None
-        return out
-
-    def _rebuild(self, device: Mapping[str, Any]) -> tuple[TimerConfig, TimerDecoder]:
-        config = TimerConfig.create(**{**device, **self._asked, **self._fixed})
-        return config, TimerDecoder.from_config(config, stats=self.stats)
-
-    def _check_device(self, reply: Reply) -> None:
-        self.device = parse_version(reply.text)
-        if self.device.inputs < MAX_INPUTS or self.device.tick_hz != TICK_HZ:
+    def _check_version(self, device: TimerVersion, reply: Reply) -> None:
+        if device.inputs < MAX_INPUTS or device.tick_hz != TICK_HZ:
             raise ConfigurationError(
-                f"the unit on {self.port} ({reply.text}) has {self.device.inputs} inputs and a "
-                f"{self.device.tick_hz} Hz counter; this driver needs {MAX_INPUTS} inputs and "
+                f"the unit on {self.port} ({reply.text}) has {device.inputs} inputs and a "
+                f"{device.tick_hz} Hz counter; this driver needs {MAX_INPUTS} inputs and "
                 f"{TICK_HZ} Hz"
             )
 
     def _describe_load(self) -> str:
         c = self.config
         return f"timer frames of {c.slots} edge slots at {c.rate_hz:g} Hz"
-
-    @classmethod
-    def _device_info(cls, port: str, text: str) -> DeviceInfo:
-        version = parse_version(text)
-        return DeviceInfo(
-            family=cls.family,
-            port=port,
-            description=version.text,
-            serial_number=version.serial_number,
-            extra={"firmware": version.firmware, "inputs": version.inputs},
-        )

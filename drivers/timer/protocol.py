@@ -28,20 +28,22 @@ FrameBlock layout of a ``timer`` stream (``E`` slots):
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.core.errors import ConfigurationError, ProtocolError
+from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.stats import LinkStats
 from spotlab.core.ticks import unwrap_counter
-from spotlab.drivers.mcs1.framing import EventFrame, FrameBatch, FrameDecoder
-from spotlab.drivers.mcs1.metadata import recorded_config
+from spotlab.drivers.mcs1.decoding import PREFIX_FIELDS, Mcs1StreamDecoder, packed_dtype
+from spotlab.drivers.mcs1.framing import FrameBatch, FrameDecoder
+from spotlab.drivers.mcs1.metadata import as_config, recorded_config
 from spotlab.drivers.mcs1.sequence import SequenceTracker
+from spotlab.drivers.mcs1.version import VersionReply
 from spotlab.drivers.timer.config import RECORD_BYTES, TimerConfig
 
 log = logging.getLogger(__name__)
@@ -73,16 +75,7 @@ def frame_dtype(n_slots: int) -> np.dtype[Any]:
         (n_slots,) of :data:`RECORD_DTYPE`.
     """
     fields: list[tuple[str, Any, int]] = [
-        ("sync", "<u2", 0),
-        ("type", "u1", 2),
-        ("version", "u1", 3),
-        ("seq", "<u2", 4),
-        ("len", "<u2", 6),
-        ("hcrc", "<u2", 8),
-        ("frame_no", "<u4", 10),
-        ("tick", "<u4", 14),
-        ("status", "<u2", 18),
-        ("n_items", "<u2", 20),
+        *PREFIX_FIELDS,
         ("counter", "<i8", 22),
         ("armed", "<u2", 30),
         ("edges_lost", "<u2", 32),
@@ -93,19 +86,15 @@ def frame_dtype(n_slots: int) -> np.dtype[Any]:
         ("records", (RECORD_DTYPE, (n_slots,)), 42),
         ("pcrc", "<u2", 42 + RECORD_BYTES * n_slots),
     ]
-    return np.dtype(
-        {
-            "names": [f[0] for f in fields],
-            "formats": [f[1] for f in fields],
-            "offsets": [f[2] for f in fields],
-            "itemsize": 44 + RECORD_BYTES * n_slots,
-        }
-    )
+    return packed_dtype(fields, 44 + RECORD_BYTES * n_slots)
 
 
 @dataclass(frozen=True)
-class TimerVersion:
+class TimerVersion(VersionReply):
     """What a TMR unit says of itself in reply to ``VER:0`` (timer.md §2)."""
+
+    code = FAMILY_CODE
+    form = "<inputs> <outputs> <tick Hz>"
 
     firmware: str
     serial_number: str
@@ -114,33 +103,12 @@ class TimerVersion:
     tick_hz: int
     text: str
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-safe form."""
-        return asdict(self)
+
+#: Parse a ``VER:0`` reply text (``ProtocolError`` if it is not the family's).
+parse_version = TimerVersion.parse
 
 
-def parse_version(text: str) -> TimerVersion:
-    """Parse a ``VER:0`` reply text such as ``"TMR 1.0 SIM00077 8 4 10000000"``.
-
-    Raises
-    ------
-    ProtocolError
-        If it is not a TMR version reply of that form.
-    """
-    fields = text.split()
-    try:
-        if len(fields) < 6 or fields[0] != FAMILY_CODE:
-            raise ValueError(text)
-        return TimerVersion(
-            fields[1], fields[2], int(fields[3]), int(fields[4]), int(fields[5]), text
-        )
-    except ValueError as exc:
-        raise ProtocolError(
-            f"VER:0 reply {text!r} is not 'TMR <firmware> <serial> <inputs> <outputs> <tick Hz>'"
-        ) from exc
-
-
-class TimerDecoder:
+class TimerDecoder(Mcs1StreamDecoder):
     """Bytes of a TMR link in, :class:`FrameBlock` out (a ``StreamDecoder``).
 
     Parameters
@@ -196,54 +164,14 @@ class TimerDecoder:
         cls, config: TimerConfig | Mapping[str, Any], *, stats: LinkStats | None = None
     ) -> TimerDecoder:
         """A decoder for a configuration (a :class:`TimerConfig` or its ``to_dict()``)."""
-        if not isinstance(config, TimerConfig):
-            config = TimerConfig.from_dict(config)
+        config = as_config(config, TimerConfig)
         return cls(config.slots, stats=stats, frame_period_us=1e9 / config.rate_mhz)
-
-    def feed(self, data: bytes | bytearray | memoryview, arrival_ns: int) -> FrameBlock:
-        """Decode ``data`` (appended to what is buffered) received at host ``arrival_ns``."""
-        self.stats.bytes += len(data)
-        return self._decode(self._frames.feed(data, arrival_ns))
-
-    def feed_many(self, chunks: Iterable[tuple[bytes | bytearray | memoryview, int]]) -> FrameBlock:
-        """Decode several reads in one pass (replay); stamps stay per read."""
-        chunks = list(chunks)
-        self.stats.bytes += sum(len(data) for data, _ in chunks)
-        return self._decode(self._frames.feed_many(chunks))
-
-    def flush(self) -> FrameBlock:
-        """End of input: resolve the bytes still buffered."""
-        return self._decode(self._frames.flush())
 
     def mark_discontinuity(self) -> None:
         """The link was broken or the stream restarted: counters (and edge counts) from 0."""
-        self._frames.discard()
-        self._tracker.mark_discontinuity()
+        super().mark_discontinuity()
         self._counts.clear()
         self._lost_last = None
-
-    def take_events(self) -> list[EventFrame]:
-        """Replies received inside event frames since the last call."""
-        return self._frames.take_events()
-
-    @property
-    def banner_seen(self) -> bool:
-        """Whether the reset banner appeared between frames (the device reset itself)."""
-        return self._frames.banner_seen
-
-    @banner_seen.setter
-    def banner_seen(self, value: bool) -> None:
-        self._frames.banner_seen = value
-
-    @property
-    def buffered(self) -> int:
-        """Bytes received and not yet decoded or discarded."""
-        return self._frames.buffered
-
-    @property
-    def restarts(self) -> int:
-        """Streams restarted without :meth:`mark_discontinuity`."""
-        return self._tracker.restarts
 
     def _empty(self) -> FrameBlock:
         return FrameBlock.empty(self.slots + 1, 1, len(VALUES))
@@ -330,15 +258,8 @@ class TimerDecoder:
 def decoder_from_metadata(meta: Mapping[str, Any]) -> TimerDecoder:
     """Rebuild the decoder of a recorded TMR stream.
 
-    Parameters
-    ----------
-    meta : mapping
-        :meth:`TimerDriver.metadata`, the stream's ``StreamSpec.to_dict()``, or a
-        configuration dictionary (``TimerConfig.to_dict()``).
-
-    Raises
-    ------
-    ConfigurationError
-        If the metadata belongs to another family or holds no TMR configuration.
+    ``meta`` is :meth:`TimerDriver.metadata`, the stream's ``StreamSpec.to_dict()`` or the
+    configuration's ``to_dict()`` (:func:`~spotlab.drivers.mcs1.metadata.recorded_config`,
+    which raises ``ConfigurationError`` for another family's).
     """
     return TimerDecoder.from_config(recorded_config(meta, "timer", "TMR", ("slots",)))

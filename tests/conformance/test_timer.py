@@ -1,34 +1,27 @@
-"""TMR conformance: the simulator in CI, a real unit with ``--hw timer=PORT``."""
+"""TMR conformance: the simulator in CI, a real unit with ``--hw timer=PORT``.
+
+The shared MCS-1 suite (:mod:`spotlab.testing.mcs1_conformance`) with the TMR
+description, and the TMR-only test: the counter a pulse reply carries.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import serial
 
-import pytest
-
-from spotlab.simulators import service
-from spotlab.testing.pytest_plugin import hardware_ports
-from spotlab.testing.timer_conformance import TimerConformance
+from spotlab.testing.mcs1_conformance import Mcs1Conformance
+from spotlab.testing.mcs1_families import TIMER
+from spotlab.testing.wire import ask
 
 
-@pytest.fixture(params=["pty", "sim-url"])
-def timer_port(request: pytest.FixtureRequest) -> Iterator[str]:
-    hw = hardware_ports(request.config).get("timer")
-    if hw is not None:
-        if request.param != "pty":
-            pytest.skip("hardware run: one port only")
-        yield hw
-        return
-    options = service.TimerSimOptions(seed=3)
-    if request.param == "sim-url":
-        yield service.timer_url_for(options)
-        return
-    server = service.serve_timer_pty(options)
-    try:
-        yield str(server.path)
-    finally:
-        server.stop()
+class TestTimerConformance(Mcs1Conformance):
+    """Every test of the MCS-1 suite, and the TMR one, against ``device_port``."""
 
+    family = TIMER
 
-class TestTimerConformance(TimerConformance):
-    """Every test of the family's suite, against ``timer_port``."""
+    def test_pulse_reply_carries_a_counter_on_a_whole_microsecond(
+        self, link: serial.Serial
+    ) -> None:
+        a = int(ask(link, "PULS:0").split()[1], 16)
+        b = int(ask(link, "PULS:0").split()[1], 16)
+        assert a % 10 == 0 and b % 10 == 0
+        assert 0 < b - a < 20_000_000  # less than 2 s between the two
