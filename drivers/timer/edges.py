@@ -143,7 +143,7 @@ def edges_from_recording(
         The journal (``.spj``).
     decoder_for : callable
         Decoder factory for every stream of the recording
-        (``spotlab.console.decoding.decoder_for``).
+        (``spotlab.processing.decoding.decoder_for``).
     stream : str
         Name of the timer stream.
 

@@ -29,8 +29,8 @@ import numpy as np
 import numpy.typing as npt
 
 from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for
 from spotlab.io.journal import JournalReader, RecordType
+from spotlab.processing.decoding import decoder_for
 
 CLI: tuple[str, ...] = (sys.executable, "-m", "spotlab.console.cli")
 #: The system of the issue: 4 cameras x 32 LEDs at 200 Hz.

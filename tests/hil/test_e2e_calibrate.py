@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from _e2e import assert_one_clear_error, record_args, run_cli, sim_pty, spawn_cli, stop_process
 
-from spotlab.console.recorded_observations import frame_numbers, read_selspot
 from spotlab.geometry import Rig
 from spotlab.geometry.lens_check import lens_problems
 from spotlab.io import read_c3d
+from spotlab.processing.recorded_observations import frame_numbers, read_selspot
 from spotlab.simulators.truth import read_truth_positions
 
 CAMERAS, RATE_HZ = 4, 100.0

@@ -16,8 +16,8 @@ from _e2e import _first_line as first_line
 from _e2e import run_cli, spawn_cli, stop_process
 
 from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for
 from spotlab.drivers.centroid import blobs_from_blocks
+from spotlab.processing.decoding import decoder_for
 
 
 @pytest.mark.timeout(60)

@@ -27,9 +27,9 @@ from _e2e import _first_line as first_line
 from _e2e import assert_one_clear_error, run_cli, spawn_cli, stop_process
 from numpy.typing import NDArray
 
-from spotlab.console.blob_trajectories import read_blob_recording
 from spotlab.geometry import Rig
 from spotlab.io import read_c3d
+from spotlab.processing.blob_trajectories import read_blob_recording
 from spotlab.reconstruction import triangulate
 
 CAMERAS, WAND_LENGTH_MM = 8, 500.0

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from _e2e import assert_one_clear_error, record_args, run_cli, sim_pty
 
-from spotlab.console.recorded_observations import frame_numbers, read_selspot
 from spotlab.io import read_c3d, read_trc
+from spotlab.processing.recorded_observations import frame_numbers, read_selspot
 from spotlab.simulators.truth import read_truth_positions
 
 CAMERAS, LEDS, RATE_HZ, SECONDS = 4, 8, 200.0, 3.0

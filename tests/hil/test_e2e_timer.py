@@ -19,8 +19,8 @@ from _e2e import _first_line as first_line
 from _e2e import run_cli, sim_pty, spawn_cli, stop_process
 
 from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for
 from spotlab.drivers.timer import edges_from_recording
+from spotlab.processing.decoding import decoder_for
 
 
 def _rows(path: Path) -> list[dict[str, str]]:

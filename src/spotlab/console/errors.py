@@ -1,21 +1,22 @@
-"""How the command line reports failures: one clear line, a non-zero exit, no traceback."""
+"""How the command line reports failures: one clear line, a non-zero exit, no traceback.
+
+:class:`CommandError` is the processing layer's
+:class:`~spotlab.processing.errors.InputError`: what ``spotlab.processing`` raises for an
+input it cannot use is reported like a command's own user error.
+"""
 
 from __future__ import annotations
 
 import sys
 
+from spotlab.processing.errors import EXIT_FAILURE
+from spotlab.processing.errors import InputError as CommandError
+
+__all__ = ["EXIT_FAILURE", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CommandError", "report"]
+
 EXIT_OK = 0
-EXIT_FAILURE = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
-
-
-class CommandError(Exception):
-    """A user-facing failure of a command; its message is printed as it is."""
-
-    def __init__(self, message: str, exit_code: int = EXIT_FAILURE) -> None:
-        super().__init__(message)
-        self.exit_code = exit_code
 
 
 def report(message: str) -> None:

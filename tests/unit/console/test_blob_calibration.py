@@ -13,13 +13,13 @@ import pytest
 import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
-from spotlab.console.blob_calibration_inputs import load_blob_recordings
-from spotlab.console.calibration_inputs import WandObservations
 from spotlab.console.cli import main
 from spotlab.console.commands.calibrate import _check_scale
 from spotlab.console.errors import CommandError
 from spotlab.drivers.centroid import CentroidDriver
 from spotlab.geometry import Camera, Rig
+from spotlab.processing.blob_calibration_inputs import load_blob_recordings
+from spotlab.processing.calibration_inputs import WandObservations
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
 from spotlab.simulators.motions import reference_markers
 

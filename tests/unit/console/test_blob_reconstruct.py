@@ -16,18 +16,18 @@ import pytest
 import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
-from spotlab.console.blob_trajectories import (
-    MODEL_KEY,
-    BlobRecording,
-    _frame_numbers,
-    identify_recording,
-)
 from spotlab.console.cli import main
 from spotlab.console.errors import CommandError
 from spotlab.drivers.centroid import CentroidDriver
 from spotlab.geometry import Rig
 from spotlab.io import read_c3d, read_trc
 from spotlab.io.journal import JournalReader
+from spotlab.processing.blob_trajectories import (
+    MODEL_KEY,
+    BlobRecording,
+    _frame_numbers,
+    identify_recording,
+)
 from spotlab.reconstruction.identification import MarkerModel
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
 from spotlab.testing.centroid_model import body_marker_model, write_body_model

@@ -11,10 +11,10 @@ import pytest
 import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
-from spotlab.console import calibration_inputs
-from spotlab.console.calibration_inputs import load_recordings
 from spotlab.console.errors import CommandError
 from spotlab.drivers.selspot import SelspotDriver
+from spotlab.processing import calibration_inputs
+from spotlab.processing.calibration_inputs import load_recordings
 
 URL = "sim://selspot?cameras=2&leds=6&reflectance=0"
 

@@ -13,9 +13,9 @@ import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
 from spotlab.console.cli import main
-from spotlab.console.trajectories import reconstruct_file
 from spotlab.drivers.selspot import SelspotDriver
 from spotlab.io import Trial, read_c3d, read_trc, write_c3d
+from spotlab.processing.trajectories import reconstruct_file
 from spotlab.simulators.rigs import ring_rig
 from spotlab.simulators.truth import read_truth_positions
 
@@ -67,7 +67,7 @@ def test_recording_with_the_true_rig_to_c3d_and_trc_at_once(
     trial = read_c3d(c3d)
     assert np.allclose(read_trc(trc).points, trial.points, atol=1e-3, equal_nan=True)
     # Frame k of the trial is the recorded frame stamped ticks[k]: compare with the truth.
-    ticks = reconstruct_file(folder / "run.spj", folder / "psd.toml", show_progress=False).ticks
+    ticks = reconstruct_file(folder / "run.spj", folder / "psd.toml").ticks
     assert ticks is not None and ticks.shape == (trial.n_frames,)
     truth = read_truth_positions(folder / "truth.csv").at_ticks(ticks)
     error = np.linalg.norm(trial.points - truth, axis=-1)

@@ -14,12 +14,12 @@ import pytest
 
 from spotlab.console.cli import main
 from spotlab.console.errors import CommandError
-from spotlab.console.marker_observations import MarkerObservations
 from spotlab.console.progress import Progress
-from spotlab.console.recorded_observations import SelspotRecording, frame_numbers
-from spotlab.console.trajectories import reconstruct
 from spotlab.geometry import Rig
 from spotlab.io import read_c3d, read_trc
+from spotlab.processing.marker_observations import MarkerObservations
+from spotlab.processing.recorded_observations import SelspotRecording, frame_numbers
+from spotlab.processing.trajectories import reconstruct
 from spotlab.simulators.rigs import ring_rig
 
 NOISE_PX = 0.2

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from spotlab.console.errors import CommandError
-from spotlab.console.marker_observations import MarkerObservations
-from spotlab.console.synchronised_export import (
+from spotlab.core.streams import StreamSpec
+from spotlab.geometry import Rig
+from spotlab.processing.marker_observations import MarkerObservations
+from spotlab.processing.synchronised_export import (
     ImageStream,
     check_rig,
     synchronise_observations,
 )
-from spotlab.console.trajectories import reconstruct
-from spotlab.core.streams import StreamSpec
-from spotlab.geometry import Rig
+from spotlab.processing.trajectories import reconstruct
 from spotlab.simulators.rigs import ring_rig
 
 RIG = ring_rig(8, distortion=False)

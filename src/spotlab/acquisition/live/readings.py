@@ -1,7 +1,8 @@
 """Image coordinates of an ``image2d`` stream's frames, NaN where a reading is unusable.
 
 The rule for lateral-photodiode (PSD) detector counts, shared by the live pipeline and
-the console's reading of recordings (``spotlab.console.recorded_observations``):
+the processing layer's reading of recordings
+(``spotlab.processing.recorded_observations``):
 
 - a reading the device flagged not valid is NaN already;
 - a reading the device flagged saturated (SPX flag ``0x02``,

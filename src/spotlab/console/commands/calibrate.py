@@ -1,8 +1,8 @@
 """``spotlab calibrate``: wand self-calibration of a rig from observations.
 
 Reads observations (npz arrays, CSV tables, or a wand-dance recording with a static
-recording of the reference object; see :mod:`spotlab.console.calibration_inputs` for
-SELSPOT recordings and :mod:`spotlab.console.blob_calibration_inputs` for video-centroid
+recording of the reference object; see :mod:`spotlab.processing.calibration_inputs` for
+SELSPOT recordings and :mod:`spotlab.processing.blob_calibration_inputs` for video-centroid
 ones, whose wand and reference markers are found among the blobs), runs
 :func:`spotlab.calibration.wand_calibrate` from a cold start, writes the calibration
 (TOML in the anipose / Pose2Sim layout), the quality report (JSON) and its figure (PNG).
@@ -19,18 +19,18 @@ from typing import Any
 import numpy as np
 
 from spotlab.calibration import wand_calibrate, write_report_figure
-from spotlab.console.blob_calibration_inputs import BlobCalibrationInputs, load_blob_recordings
-from spotlab.console.blob_trajectories import is_blob_recording
-from spotlab.console.calibration_inputs import (
+from spotlab.console.errors import CommandError
+from spotlab.geometry import Rig
+from spotlab.processing.blob_calibration_inputs import BlobCalibrationInputs, load_blob_recordings
+from spotlab.processing.blob_trajectories import is_blob_recording
+from spotlab.processing.calibration_inputs import (
     WandObservations,
     load_csv,
     load_npz,
     load_recordings,
 )
-from spotlab.console.decoding import input_suffix
-from spotlab.console.errors import CommandError
-from spotlab.console.paths import check_output_paths
-from spotlab.geometry import Rig
+from spotlab.processing.decoding import input_suffix
+from spotlab.processing.paths import check_output_paths
 from spotlab.reconstruction import triangulate
 
 

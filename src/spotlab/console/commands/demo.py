@@ -19,12 +19,12 @@ import numpy as np
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.replay import replay, summarize
 from spotlab.acquisition.session import Session, SessionStatus
-from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
-from spotlab.console.paths import check_output_dir
 from spotlab.console.progress import Progress
-from spotlab.console.trajectories import reconstruct_file, write_trial
 from spotlab.drivers.selspot import SelspotDriver
+from spotlab.processing.decoding import decoder_for
+from spotlab.processing.paths import check_output_dir
+from spotlab.processing.trajectories import reconstruct_file, write_trial
 from spotlab.simulators import service
 from spotlab.simulators.truth import read_truth_positions
 
@@ -70,7 +70,7 @@ def _valid_fraction(journal: Path) -> float:
 
 def _reconstruct(journal: Path, rig: Path, truth: Path, c3d: Path) -> dict[str, Any]:
     """Reconstruct the recording with the simulator's true rig, export it, score it."""
-    result = reconstruct_file(journal, rig, show_progress=False)
+    result = reconstruct_file(journal, rig)
     write_trial(c3d, result.trial)
     ticks = result.ticks if result.ticks is not None else np.zeros(0, np.int64)
     true = read_truth_positions(truth).at_ticks(ticks)

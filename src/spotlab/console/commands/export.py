@@ -2,17 +2,17 @@
 
 ``FILE`` is a C3D or TRC file (converted), or observations that ``spotlab reconstruct``
 reads (a ``.spj`` recording, npz, CSV) with ``--calibration``: they are reconstructed on
-the way (:mod:`spotlab.console.trajectories`).
+the way (:mod:`spotlab.processing.trajectories`).
 
 A recording with a timer stream (or with ``--sync``) is reconstructed on session times:
 every ``image2d`` stream resampled at common instants (``--rate``), the cameras of all
 streams stacked in stream order (the calibration lists them so), see
-:mod:`spotlab.console.synchronised_export`.
+:mod:`spotlab.processing.synchronised_export`.
 
 ``--timestamps OUT.csv`` writes the session time of every frame of every stream of a
 recording (``stream, seq, time_s, device_ticks, method``), ``--sync-report OUT.json``
 the clock report (reference, drift, jitter and events per stream); see
-:mod:`spotlab.console.session_times` and docs/synchronisation.md "From a recording".
+:mod:`spotlab.processing.session_times` and docs/synchronisation.md "From a recording".
 """
 
 from __future__ import annotations
@@ -23,25 +23,24 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from spotlab.console.decoding import input_suffix
 from spotlab.console.errors import CommandError
-from spotlab.console.marker_observations import OBSERVATION_SUFFIXES
-from spotlab.console.paths import check_output_paths
-from spotlab.console.session_times import (
-    calibration_for,
-    parse_wiring,
-    recording_timebase,
-    write_timestamps,
-)
-from spotlab.console.synchronised_export import reconstruct_recording
-from spotlab.console.trajectories import (
-    check_outputs,
-    print_summary,
-    reconstruct_file,
-    write_trial,
-)
+from spotlab.console.options import parse_wiring
+from spotlab.console.progress import Progress
+from spotlab.console.summaries import print_summary
 from spotlab.io import TRIAL_READERS, Trial
 from spotlab.kinematics import smooth_trial
+from spotlab.processing import (
+    OBSERVATION_SUFFIXES,
+    calibration_for,
+    check_output_paths,
+    check_outputs,
+    input_suffix,
+    reconstruct_file,
+    reconstruct_recording,
+    recording_timebase,
+    write_timestamps,
+    write_trial,
+)
 
 
 def add_parser(sub: Any) -> None:
@@ -192,9 +191,12 @@ def run(args: argparse.Namespace) -> int:
                 path, calibration_for(path, args.calibration), sync=args.sync,
                 wiring=parse_wiring(args.wiring),
                 rate_hz=args.rate, slot_correction=not args.no_slot_correction,
+                progress=Progress,
             )  # fmt: skip
+            for note in result.notes:
+                print(f"spotlab: {note}", file=sys.stderr)
         else:
-            result = reconstruct_file(path, args.calibration, rate_hz=args.rate)
+            result = reconstruct_file(path, args.calibration, rate_hz=args.rate, progress=Progress)
         trial, summary = result.trial, result.summary
     else:
         known = ", ".join([*TRIAL_READERS, *OBSERVATION_SUFFIXES])

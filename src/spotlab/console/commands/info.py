@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.acquisition.replay import summarize
-from spotlab.console.decoding import decoder_for
+from spotlab.processing.decoding import decoder_for
 
 
 def add_parser(sub: Any) -> None:

@@ -26,9 +26,9 @@ import numpy as np
 
 from spotlab.console.commands.model_init import add_init_parser, run_learn_recording
 from spotlab.console.errors import EXIT_USAGE, CommandError
-from spotlab.console.paths import check_output_paths
 from spotlab.core.errors import ReconstructionError
 from spotlab.io import labelled_markers, read_trial
+from spotlab.processing.paths import check_output_paths
 from spotlab.reconstruction.identification import MarkerModel, model_fit
 
 

@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from spotlab.console.blob_trajectories import _frames, read_blob_recording
 from spotlab.console.errors import CommandError
-from spotlab.console.trajectories import load_rig
 from spotlab.core.errors import CalibrationError, ReconstructionError
+from spotlab.processing.blob_trajectories import _frames, read_blob_recording
+from spotlab.processing.trajectories import load_rig
 from spotlab.reconstruction.identification import MarkerModel, RigGeometry
 from spotlab.reconstruction.identification.static_cloud import static_cloud
 from spotlab.reconstruction.identification.subject_model import (

@@ -1,8 +1,8 @@
 """``spotlab reconstruct``: observations + calibration -> marker trajectories (C3D or TRC).
 
 Observations are npz arrays, a CSV table or a SELSPOT-style recording (see
-:mod:`spotlab.console.marker_observations`); the work is done by
-:mod:`spotlab.console.trajectories`, which ``spotlab export`` shares.
+:mod:`spotlab.processing.marker_observations`); the work is done by
+:mod:`spotlab.processing.trajectories`, which ``spotlab export`` shares.
 """
 
 from __future__ import annotations
@@ -12,14 +12,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-from spotlab.console.paths import check_output_paths
-from spotlab.console.session_times import calibration_for
-from spotlab.console.trajectories import (
-    check_outputs,
-    print_summary,
-    reconstruct_file,
-    write_trial,
-)
+from spotlab.console.progress import Progress
+from spotlab.console.summaries import print_summary
+from spotlab.processing.paths import check_output_paths
+from spotlab.processing.session_times import calibration_for
+from spotlab.processing.trajectories import check_outputs, reconstruct_file, write_trial
 from spotlab.reconstruction import METHODS
 
 
@@ -66,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         rate_hz=args.rate,
         labels=args.labels,
         model=args.model,
+        progress=Progress,
     )
     write_trial(args.out, result.trial)
     if args.json:

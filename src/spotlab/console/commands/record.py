@@ -13,8 +13,6 @@ from typing import Any
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.acquisition.summary import summarize
-from spotlab.console.blob_trajectories import MODEL_KEY, model_metadata
-from spotlab.console.decoding import decoder_for
 from spotlab.console.device_settings import (
     FAMILY_SETTINGS,
     GLOBAL_OPTIONS,
@@ -24,12 +22,15 @@ from spotlab.console.device_settings import (
     requests_from_options,
 )
 from spotlab.console.errors import CommandError
-from spotlab.console.paths import check_output_paths
+from spotlab.console.options import parse_wiring
 from spotlab.console.progress import Progress
-from spotlab.console.session_times import WIRING_KEY, parse_wiring
 from spotlab.core.wire import LinkEventKind
 from spotlab.drivers import Driver, available_families, load_driver
 from spotlab.io.lab_file import Lab, load_lab
+from spotlab.processing.blob_trajectories import MODEL_KEY, model_metadata
+from spotlab.processing.decoding import decoder_for
+from spotlab.processing.paths import check_output_paths
+from spotlab.processing.session_times import WIRING_KEY
 
 
 def add_parser(sub: Any) -> None:

@@ -3,7 +3,7 @@
 Every stream is fed through its driver's decoder in recording order (as
 :func:`spotlab.acquisition.replay.replay` does); the command prints what ``spotlab
 info`` prints per stream and, for each, where its frames lie on the session time base
-(:mod:`spotlab.console.session_times`): first and last frame, method, drift, jitter and
+(:mod:`spotlab.processing.session_times`): first and last frame, method, drift, jitter and
 clock events. ``--timestamps OUT.csv`` writes the frame times as ``spotlab export``
 does. Feeding a live pipeline (reconstruction, LSL outlets) from a recording belongs to
 :mod:`spotlab.acquisition.live` (``replay_live``); this command only decodes and times.
@@ -20,10 +20,11 @@ from typing import Any
 import numpy as np
 
 from spotlab.acquisition.replay import summarize
-from spotlab.console.decoding import decoder_for
 from spotlab.console.errors import CommandError
-from spotlab.console.paths import check_output_paths
-from spotlab.console.session_times import parse_wiring, recording_timebase, write_timestamps
+from spotlab.console.options import parse_wiring
+from spotlab.processing.decoding import decoder_for
+from spotlab.processing.paths import check_output_paths
+from spotlab.processing.session_times import recording_timebase, write_timestamps
 
 
 def add_parser(sub: Any) -> None:

@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from spotlab.console.errors import CommandError
-from spotlab.console.paths import check_output_dir, check_output_paths
 from spotlab.io import FileFormatError
+from spotlab.processing.paths import check_output_dir, check_output_paths
 from spotlab.simulators import service
 from spotlab.simulators.centroid_service import (
     CENTROID_MOTIONS,

@@ -17,12 +17,12 @@ from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.replay import replay
 from spotlab.acquisition.session import Session
 from spotlab.console.cli import main
-from spotlab.console.decoding import decoder_for
 from spotlab.core.errors import ConfigurationError, DeviceError, DeviceNotFound
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers import load_driver
 from spotlab.drivers.lsl import LslChunkDecoder, LslInletDriver, encode_chunk, parse_port
 from spotlab.drivers.selspot import SelspotDriver
+from spotlab.processing.decoding import decoder_for
 
 pytest.importorskip("pylsl", reason="the lsl extra is not installed")
 

@@ -11,7 +11,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from spotlab.console.errors import CommandError
+from spotlab.processing.errors import InputError
 
 __all__ = ["check_output_dir", "check_output_paths"]
 
@@ -41,7 +41,7 @@ def check_output_paths(outputs: Iterable[tuple[str, Path | None]]) -> None:
 
     Raises
     ------
-    CommandError
+    InputError
         Naming the option and the path: the path is a folder, its folder does not
         exist, a part of it is a regular file, the folder or the file is not writable,
         or two outputs are one file.
@@ -51,15 +51,15 @@ def check_output_paths(outputs: Iterable[tuple[str, Path | None]]) -> None:
         if path is None:
             continue
         if path.is_dir():
-            raise CommandError(f"{option} {path}: is a folder, not a file")
+            raise InputError(f"{option} {path}: is a folder, not a file")
         problem = _folder_problem(path.parent)
         if problem is not None:
-            raise CommandError(f"{option} {path}: {problem}")
+            raise InputError(f"{option} {path}: {problem}")
         if path.exists() and not os.access(path, os.W_OK):
-            raise CommandError(f"{option} {path}: the file is not writable")
+            raise InputError(f"{option} {path}: the file is not writable")
         key = path.resolve()
         if key in seen:
-            raise CommandError(f"{option} {path}: the same file as {seen[key]}")
+            raise InputError(f"{option} {path}: the same file as {seen[key]}")
         seen[key] = option
 
 
@@ -68,14 +68,14 @@ def check_output_dir(option: str, folder: Path) -> None:
 
     Raises
     ------
-    CommandError
+    InputError
         When ``folder`` or one of its parents is a regular file, or the nearest existing
         parent is not writable.
     """
     for part in [folder, *folder.parents]:
         if part.exists():
             if not part.is_dir():
-                raise CommandError(f"{option} {folder}: {part} is a file, not a folder")
+                raise InputError(f"{option} {folder}: {part} is a file, not a folder")
             if not os.access(part, os.W_OK | os.X_OK):
-                raise CommandError(f"{option} {folder}: the folder {part} is not writable")
+                raise InputError(f"{option} {folder}: the folder {part} is not writable")
             return

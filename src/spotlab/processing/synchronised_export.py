@@ -15,7 +15,7 @@ stream (or with ``--sync``):
    order): the calibration lists the cameras of the first stream, then those of the
    second, and so on (two 4-camera SELSPOT systems are one 8-camera rig). Marker ``m``
    of every stream is the same marker (its place in the stream's LED table);
-4. every instant is triangulated (:func:`spotlab.console.trajectories.reconstruct`).
+4. every instant is triangulated (:func:`spotlab.processing.trajectories.reconstruct`).
 
 The instants lie on the session grid ``k / rate`` (``rate``: the fastest stream's
 nominal rate or ``--rate``), from the first instant at which every stream has begun to
@@ -27,7 +27,6 @@ TRC ``Time`` column).
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,32 +38,35 @@ from numpy.typing import NDArray
 from spotlab.acquisition.live.readings import pixels
 from spotlab.acquisition.synchroniser import StreamInput, Synchroniser
 from spotlab.acquisition.timebase import SessionTimebase, session_timebase
-from spotlab.console.errors import CommandError
-from spotlab.console.marker_observations import MarkerObservations
-from spotlab.console.progress import Progress
-from spotlab.console.session_times import (
+from spotlab.core.errors import SynchronisationError
+from spotlab.core.streams import StreamSpec
+from spotlab.geometry import Rig
+from spotlab.processing.errors import InputError
+from spotlab.processing.marker_observations import MarkerObservations
+from spotlab.processing.progress import ProgressFactory
+from spotlab.processing.session_times import (
     DecodedStreams,
     decode_streams,
     effective_wiring,
     read_streams,
 )
-from spotlab.console.trajectories import (
+from spotlab.processing.trajectories import (
     Reconstruction,
     load_rig,
     reconstruct,
     reconstruct_file,
 )
-from spotlab.core.errors import SynchronisationError
-from spotlab.core.streams import StreamSpec
-from spotlab.geometry import Rig
 
 __all__ = [
     "NO_TIMER_NOTE",
     "ImageStream",
+    "OpenedRecording",
+    "SynchronisedExport",
     "SynchronisedObservations",
     "export_synchronised",
     "has_timer",
     "image_streams",
+    "open_recording",
     "reconstruct_recording",
     "synchronise_observations",
 ]
@@ -208,15 +210,15 @@ def synchronise_observations(
 
     Raises
     ------
-    CommandError
+    InputError
         No stream, a rate that is not positive, streams that do not overlap in session
         time after 0, or frames the synchroniser refuses (naming the stream).
     """
     if not streams:
-        raise CommandError(f"the recording holds no {IMAGE_KIND} stream to reconstruct")
+        raise InputError(f"the recording holds no {IMAGE_KIND} stream to reconstruct")
     rate = max(s.spec.rate_hz for s in streams) if rate_hz is None else float(rate_hz)
     if not (np.isfinite(rate) and rate > 0):
-        raise CommandError(f"--rate must be a positive number of Hz, not {rate_hz}")
+        raise InputError(f"--rate must be a positive number of Hz, not {rate_hz}")
     try:
         sync = Synchroniser(
             [StreamInput(s.spec, s.seq, s.time_s, s.uv, s.clock_rate) for s in streams],
@@ -224,12 +226,12 @@ def synchronise_observations(
         )
         span = sync.instants(rate)
     except SynchronisationError as exc:
-        raise CommandError(str(exc)) from None
+        raise InputError(str(exc)) from None
     # on the session grid k / rate, from session time 0 on
     k0 = max(int(np.ceil(span[0] * rate - 1e-9)), 0)
     k1 = int(np.floor(span[-1] * rate + 1e-9))
     if k1 < k0:
-        raise CommandError(
+        raise InputError(
             "the streams hold no common instant after session time 0 "
             f"(their overlap ends at {span[-1]:.6f} s)"
         )
@@ -263,18 +265,82 @@ def synchronise_observations(
     )
 
 
+@dataclass(frozen=True)
+class OpenedRecording:
+    """A decoded recording with the session time of every frame of every stream.
+
+    Attributes
+    ----------
+    path : Path
+        The ``.spj`` recording.
+    decoded : DecodedStreams
+        Every decoded block of every stream.
+    timebase : SessionTimebase
+        The session time (s) of every frame of every stream, the clock report.
+    streams : list of ImageStream
+        The ``image2d`` streams with their readings on session time, in recording order.
+    notes : list of str
+        What the user should hear about: the time base's notes, then streams left out
+        and why.
+    """
+
+    path: Path
+    decoded: DecodedStreams
+    timebase: SessionTimebase
+    streams: list[ImageStream]
+    notes: list[str]
+
+
+def open_recording(
+    recording: Path,
+    *,
+    wiring: Mapping[str, int] | None = None,
+    decoded: DecodedStreams | None = None,
+) -> OpenedRecording:
+    """Decode a recording and put every frame of every stream on session time.
+
+    Parameters
+    ----------
+    recording : Path
+        The ``.spj`` recording.
+    wiring : mapping of str to int, optional
+        Timer input of each stream's frame pulses (the recording's stored wiring, else
+        found from the timer's edges, when omitted).
+    decoded : DecodedStreams, optional
+        The recording already decoded (by :func:`decode_streams`).
+
+    Returns
+    -------
+    OpenedRecording
+
+    Raises
+    ------
+    InputError
+        A recording without decoded frames, with several timer streams, or whose streams
+        cannot be put on one time base.
+    """
+    decoded = decode_streams(recording) if decoded is None else decoded
+    devices, timer, _ = read_streams(recording, decoded)
+    try:
+        timebase = session_timebase(devices, timer, effective_wiring(recording, wiring))
+    except SynchronisationError as exc:
+        raise InputError(f"{recording}: {exc}") from None
+    streams, notes = image_streams(decoded, timebase)
+    return OpenedRecording(recording, decoded, timebase, streams, [*timebase.notes, *notes])
+
+
 def check_rig(rig: Rig, cameras: Mapping[str, int]) -> None:
     """The rig must hold exactly the stacked cameras of every stream.
 
     Raises
     ------
-    CommandError
+    InputError
         Naming the cameras per stream and the rig's count.
     """
     total = sum(cameras.values())
     if len(rig) != total:
         per = ", ".join(f"{name}: {n}" for name, n in cameras.items())
-        raise CommandError(
+        raise InputError(
             f"the calibration has {len(rig)} cameras but the {IMAGE_KIND} streams have "
             f"{total} ({per}); list the cameras of each stream, in stream order"
         )
@@ -298,7 +364,7 @@ def export_synchronised(
     slot_correction: bool = True,
     method: str = "odle",
     decoded: DecodedStreams | None = None,
-    show_progress: bool = True,
+    progress: ProgressFactory | None = None,
 ) -> SynchronisedExport:
     """Reconstruct every ``image2d`` stream of a recording at common session instants.
 
@@ -317,8 +383,8 @@ def export_synchronised(
         Triangulation estimator.
     decoded : DecodedStreams, optional
         The recording already decoded.
-    show_progress : bool
-        Progress on stderr (when it is a terminal).
+    progress : ProgressFactory, optional
+        Makes the progress sink of the triangulation (none by default).
 
     Returns
     -------
@@ -328,18 +394,13 @@ def export_synchronised(
 
     Raises
     ------
-    CommandError
+    InputError
         Unreadable inputs, no image stream, a rig whose camera count differs.
     """
     rig = load_rig(calibration)
-    decoded = decode_streams(recording) if decoded is None else decoded
-    devices, timer, _ = read_streams(recording, decoded)
-    try:
-        timebase = session_timebase(devices, timer, effective_wiring(recording, wiring))
-    except SynchronisationError as exc:
-        raise CommandError(f"{recording}: {exc}") from None
-    streams, notes = image_streams(decoded, timebase)
-    obs = synchronise_observations(streams, rate_hz=rate_hz, slot_correction=slot_correction)
+    opened = open_recording(recording, wiring=wiring, decoded=decoded)
+    timebase = opened.timebase
+    obs = synchronise_observations(opened.streams, rate_hz=rate_hz, slot_correction=slot_correction)
     check_rig(rig, obs.cameras)
     facts: dict[str, Any] = {
         "session_reference": timebase.reference,
@@ -349,12 +410,12 @@ def export_synchronised(
         "streams": obs.facts,
     }
     markers = MarkerObservations(obs.uv, obs.rate_hz, facts=facts)
-    progress = Progress("reconstructing", total=obs.times.size) if show_progress else None
-    result = reconstruct(rig, markers, method=method, progress=progress)
+    sink = progress("reconstructing", obs.times.size) if progress is not None else None
+    result = reconstruct(rig, markers, method=method, progress=sink)
     result.trial.first_frame = obs.first_frame
     result.trial.metadata["session_start_s"] = float(obs.times[0])
     result.trial.metadata["session_reference"] = timebase.reference
-    return SynchronisedExport(result, timebase, [*timebase.notes, *notes])
+    return SynchronisedExport(result, timebase, opened.notes)
 
 
 def reconstruct_recording(
@@ -365,18 +426,20 @@ def reconstruct_recording(
     wiring: Mapping[str, int] | None = None,
     rate_hz: float | None = None,
     slot_correction: bool = True,
-    show_progress: bool = True,
+    progress: ProgressFactory | None = None,
 ) -> Reconstruction:
     """``spotlab export REC.spj --calibration``: on session times when the recording holds
     a timer stream or ``sync`` is set (:func:`export_synchronised`), else the one stream
-    by frame number at its nominal rate (:func:`reconstruct_file`); notes go to stderr.
+    by frame number at its nominal rate (:func:`reconstruct_file`).
+
+    What the user should hear about is in the result's ``notes`` (the command line
+    prints them on stderr): for a recording without a timer, that it was reconstructed
+    by frame number; else the warnings of the time base and the notes of each stream.
     """
     decoded = decode_streams(recording)
     if not (sync or has_timer(decoded)):
-        result = reconstruct_file(
-            recording, calibration, rate_hz=rate_hz, show_progress=show_progress
-        )
-        print(f"spotlab: note: {NO_TIMER_NOTE}", file=sys.stderr)
+        result = reconstruct_file(recording, calibration, rate_hz=rate_hz, progress=progress)
+        result.notes.append(f"note: {NO_TIMER_NOTE}")
         return result
     done = export_synchronised(
         recording,
@@ -385,11 +448,12 @@ def reconstruct_recording(
         rate_hz=rate_hz,
         slot_correction=slot_correction,
         decoded=decoded,
-        show_progress=show_progress,
+        progress=progress,
     )
-    for note in done.notes:
-        print(f"spotlab: warning: {note}", file=sys.stderr)
-    for timing in done.timebase.streams.values():
-        for note in timing.notes:
-            print(f"spotlab: {timing.name}: {note}", file=sys.stderr)
+    done.result.notes += [f"warning: {note}" for note in done.notes]
+    done.result.notes += [
+        f"{timing.name}: {note}"
+        for timing in done.timebase.streams.values()
+        for note in timing.notes
+    ]
     return done.result

@@ -3,33 +3,33 @@
 
 The rig's cameras are matched to the observation's by name when the observations name
 their cameras, else by order. Frames are triangulated in chunks
-(:func:`spotlab.reconstruction.triangulate_points`) with progress on stderr.
+(:func:`spotlab.reconstruction.triangulate_points`), their progress told to a sink the
+caller gives (nothing here prints).
 """
 
 from __future__ import annotations
 
 from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.console.blob_trajectories import (
-    identify_recording,
-    is_blob_recording,
-    load_model,
-    print_blob_summary,
-    read_blob_recording,
-)
-from spotlab.console.errors import CommandError
-from spotlab.console.marker_observations import MarkerObservations, load_observations
-from spotlab.console.paths import check_output_paths
-from spotlab.console.progress import Progress
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Rig
 from spotlab.io import Trial, write_c3d, write_trc
+from spotlab.processing.blob_trajectories import (
+    identify_recording,
+    is_blob_recording,
+    load_model,
+    read_blob_recording,
+)
+from spotlab.processing.errors import InputError
+from spotlab.processing.marker_observations import MarkerObservations, load_observations
+from spotlab.processing.paths import check_output_paths
+from spotlab.processing.progress import ProgressFactory, ProgressSink
 from spotlab.reconstruction import METHODS, triangulate_points
 
 __all__ = [
@@ -38,7 +38,6 @@ __all__ = [
     "check_outputs",
     "load_rig",
     "match_cameras",
-    "print_summary",
     "reconstruct",
     "reconstruct_file",
     "write_trial",
@@ -66,24 +65,29 @@ class Reconstruction:
         (px) overall and per camera, method, and facts of the input.
     ticks : ndarray of int64, shape (F,), or None
         Device time stamp of each frame of a recording (-1 for a lost frame).
+    notes : list of str
+        What the user should hear about, one line each, prefixed with its kind
+        (``"note: ..."``, ``"warning: ..."``, ``"<stream>: ..."``); the command line
+        prints them on stderr after ``spotlab: ``.
     """
 
     trial: Trial
     summary: dict[str, Any]
     ticks: NDArray[np.int64] | None = None
+    notes: list[str] = field(default_factory=list)
 
 
 def load_rig(path: Path) -> Rig:
-    """Read a calibration (TOML, anipose / Pose2Sim layout); a bad file is a CommandError."""
+    """Read a calibration (TOML, anipose / Pose2Sim layout); a bad file is a InputError."""
     if not path.is_file():
-        raise CommandError(f"{path}: no such calibration file")
+        raise InputError(f"{path}: no such calibration file")
     try:
         return Rig.load(path)
     except CalibrationError as exc:
         text = str(exc)
-        raise CommandError(text if str(path) in text else f"{path}: {text}") from None
+        raise InputError(text if str(path) in text else f"{path}: {text}") from None
     except (UnicodeDecodeError, ValueError) as exc:
-        raise CommandError(f"{path}: not a calibration file ({exc})") from None
+        raise InputError(f"{path}: not a calibration file ({exc})") from None
 
 
 def match_cameras(rig: Rig, n_cameras: int, names: Sequence[str] | None) -> Rig:
@@ -94,22 +98,22 @@ def match_cameras(rig: Rig, n_cameras: int, names: Sequence[str] | None) -> Rig:
 
     Raises
     ------
-    CommandError
+    InputError
         For a camera name the rig lacks or a count that differs.
     """
     if names is not None:
         if len(names) != n_cameras:
-            raise CommandError(f"{len(names)} camera names for {n_cameras} cameras observed")
+            raise InputError(f"{len(names)} camera names for {n_cameras} cameras observed")
         index = {name: i for i, name in enumerate(rig.names)}
         missing = [n for n in names if n not in index]
         if missing:
-            raise CommandError(
+            raise InputError(
                 f"the calibration has no camera {', '.join(map(repr, missing))} "
                 f"(it has {', '.join(rig.names)})"
             )
         return Rig([rig[index[n]] for n in names])
     if len(rig) != n_cameras:
-        raise CommandError(
+        raise InputError(
             f"the observations have {n_cameras} cameras but the calibration has {len(rig)}"
         )
     return rig
@@ -119,7 +123,7 @@ def check_outputs(paths: Sequence[Path]) -> None:
     """Refuse an output whose suffix names no trial format, before any work is done."""
     for path in paths:
         if path.suffix.lower() not in TRIAL_WRITERS:
-            raise CommandError(
+            raise InputError(
                 f"{path}: unknown output format {path.suffix!r} ({', '.join(TRIAL_WRITERS)})"
             )
     check_output_paths(("output", path) for path in paths)
@@ -145,7 +149,7 @@ def reconstruct(
     method: str = "odle",
     rate_hz: float | None = None,
     labels: Sequence[str] | None = None,
-    progress: Progress | None = None,
+    progress: ProgressSink | None = None,
 ) -> Reconstruction:
     """Triangulate every frame of ``obs`` with the matching cameras of ``rig``.
 
@@ -161,8 +165,8 @@ def reconstruct(
         Frame rate; overrides the observations' own.
     labels : sequence of str, optional
         Marker names (M); override the observations' own.
-    progress : Progress, optional
-        Shown per chunk of frames.
+    progress : ProgressSink, optional
+        Told per chunk of frames.
 
     Returns
     -------
@@ -170,23 +174,23 @@ def reconstruct(
 
     Raises
     ------
-    CommandError
+    InputError
         For an unknown rate, labels whose count differs from the markers', cameras that
         do not match the rig.
     ReconstructionError
         From the triangulation (for example ``midpoint`` with other than two views).
     """
     if method not in METHODS:
-        raise CommandError(f"unknown method {method!r} ({', '.join(METHODS)})")
+        raise InputError(f"unknown method {method!r} ({', '.join(METHODS)})")
     F, C, M, _ = obs.uv.shape
     rate = rate_hz if rate_hz is not None else obs.rate_hz
     if rate is None:
-        raise CommandError("the frame rate is not known: give --rate HZ")
+        raise InputError("the frame rate is not known: give --rate HZ")
     if not (np.isfinite(rate) and rate > 0):
-        raise CommandError(f"the frame rate must be a positive number of Hz, not {rate:g}")
+        raise InputError(f"the frame rate must be a positive number of Hz, not {rate:g}")
     names = list(labels) if labels else obs.labels or [f"M{m + 1}" for m in range(M)]
     if len(names) != M:
-        raise CommandError(f"{len(names)} marker labels for {M} markers")
+        raise InputError(f"{len(names)} marker labels for {M} markers")
     cameras = match_cameras(rig, C, obs.camera_names)
     uv = obs.uv.transpose(1, 0, 2, 3)  # (C, F, M, 2)
     points = np.full((F, M, 3), np.nan)
@@ -234,56 +238,38 @@ def reconstruct_file(
     rate_hz: float | None = None,
     labels: Sequence[str] | None = None,
     model: Path | None = None,
-    show_progress: bool = True,
+    progress: ProgressFactory | None = None,
 ) -> Reconstruction:
     """:func:`reconstruct` from files: observations (npz, CSV, ``.spj``) and a calibration.
 
     A video-centroid (``blobs2d``) recording takes the blob path
-    (:mod:`spotlab.console.blob_trajectories`): its markers are identified and named by
+    (:mod:`spotlab.processing.blob_trajectories`): its markers are identified and named by
     the marker model ``model`` (default: the one stored in the recording).
+
+    ``progress`` makes the progress sink of the identification or triangulation (none
+    by default).
     """
     rig = load_rig(calibration)
     if is_blob_recording(observations):
         if labels:
-            raise CommandError(
+            raise InputError(
                 f"{observations}: the markers of a video-centroid recording are named by "
                 "its marker model (--model), not --labels"
             )
         blobs = read_blob_recording(observations)
         marker_model = load_model(model, blobs, observations)
-        shown = Progress("identifying", total=blobs.blobs.n_frames) if show_progress else None
+        shown = progress("identifying", blobs.blobs.n_frames) if progress is not None else None
         found = identify_recording(rig, blobs, marker_model, rate_hz=rate_hz, progress=shown)
         summary = {"input": str(observations), "calibration": str(calibration), **found.summary}
         return Reconstruction(found.trial, summary, found.ticks)
     if model is not None:
-        raise CommandError(f"{observations}: --model applies to video-centroid recordings only")
+        raise InputError(f"{observations}: --model applies to video-centroid recordings only")
     obs = load_observations(observations)
-    progress = Progress("reconstructing", total=obs.uv.shape[0]) if show_progress else None
-    result = reconstruct(rig, obs, method=method, rate_hz=rate_hz, labels=labels, progress=progress)
+    sink = progress("reconstructing", obs.uv.shape[0]) if progress is not None else None
+    result = reconstruct(rig, obs, method=method, rate_hz=rate_hz, labels=labels, progress=sink)
     result.summary = {
         "input": str(observations),
         "calibration": str(calibration),
         **result.summary,
     }
     return result
-
-
-def print_summary(summary: dict[str, Any], outputs: Sequence[Path]) -> None:
-    """The human-readable summary of a reconstruction on stdout."""
-    if summary.get("method") == "identification":
-        print_blob_summary(summary, list(outputs))
-        return
-    rms = summary["rms_ray_px"]
-    lost = summary.get("lost_frames")
-    print(
-        f"reconstructed {summary['frames']} frames x {summary['markers']} markers at "
-        f"{summary['rate_hz']:g} Hz ({summary['method']}, {summary['cameras']} cameras)"
-        + (f", {lost} frames lost in the recording" if lost else "")
-    )
-    print(
-        f"  reconstructed      {100 * summary['reconstructed_fraction']:.1f} % of marker "
-        f"samples ({summary['markers_reconstructed']} markers seen)"
-    )
-    print("  RMS ray residual   " + ("-" if rms is None else f"{rms:.3f} px"))
-    for path in outputs:
-        print(f"  wrote              {path}")

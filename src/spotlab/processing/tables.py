@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.console.errors import CommandError
+from spotlab.processing.errors import InputError
 
 __all__ = ["camera_count", "column", "read_table"]
 
@@ -22,7 +22,7 @@ def read_table(path: Path) -> tuple[list[str], FloatArray]:
 
     Raises
     ------
-    CommandError
+    InputError
         For an unreadable file, a table without data rows, a row of the wrong length or
         a cell that is not a number (naming the row and column).
     """
@@ -30,16 +30,16 @@ def read_table(path: Path) -> tuple[list[str], FloatArray]:
         with path.open(newline="") as fh:
             rows = list(csv.reader(fh))
     except OSError as exc:
-        raise CommandError(f"{path}: {exc.strerror}") from None
+        raise InputError(f"{path}: {exc.strerror}") from None
     except UnicodeDecodeError:
-        raise CommandError(f"{path}: not a text (CSV) file") from None
+        raise InputError(f"{path}: not a text (CSV) file") from None
     if len(rows) < 2:
-        raise CommandError(f"{path}: needs a header row and at least one data row")
+        raise InputError(f"{path}: needs a header row and at least one data row")
     header = [h.strip() for h in rows[0]]
     values = np.full((len(rows) - 1, len(header)), np.nan)
     for i, row in enumerate(rows[1:]):
         if len(row) != len(header):
-            raise CommandError(
+            raise InputError(
                 f"{path}: row {i + 2} has {len(row)} cells, the header has {len(header)}"
             )
         for j, cell in enumerate(row):
@@ -48,7 +48,7 @@ def read_table(path: Path) -> tuple[list[str], FloatArray]:
                 try:
                     values[i, j] = float(cell)
                 except ValueError:
-                    raise CommandError(
+                    raise InputError(
                         f"{path}: row {i + 2}, column {header[j]!r}: {cell!r} is not a number"
                     ) from None
     return header, values
@@ -63,9 +63,9 @@ def numbered(header: Sequence[str], pattern: str, what: str, path: Path) -> list
     """The numbers 1..N that group 1 of ``pattern`` takes in the header (all of them)."""
     found = {int(m.group(1)) for h in header if (m := re.fullmatch(pattern, h))}
     if not found:
-        raise CommandError(f"{path}: no {what} columns like {pattern!r} in the header")
+        raise InputError(f"{path}: no {what} columns like {pattern!r} in the header")
     if found != set(range(1, max(found) + 1)):
-        raise CommandError(f"{path}: {what} columns must be numbered 1..N, found {sorted(found)}")
+        raise InputError(f"{path}: {what} columns must be numbered 1..N, found {sorted(found)}")
     return sorted(found)
 
 
@@ -74,4 +74,4 @@ def column(header: Sequence[str], values: FloatArray, name: str, path: Path) -> 
     try:
         return values[:, list(header).index(name)]
     except ValueError:
-        raise CommandError(f"{path}: column {name!r} is missing") from None
+        raise InputError(f"{path}: column {name!r} is missing") from None

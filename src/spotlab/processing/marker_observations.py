@@ -10,7 +10,7 @@ per frame and camera, from npz arrays, a CSV table or a SELSPOT-style recording.
   is not in the table: give ``--rate``.
 - **recording** (``.spj``) of one SELSPOT-style (``selspot``) device: every marker of
   its LED table, in detector counts, with the rules of
-  :mod:`spotlab.console.recorded_observations` (readings dropped, 4096 x 4096 counts);
+  :mod:`spotlab.processing.recorded_observations` (readings dropped, 4096 x 4096 counts);
   frames lost on the link stay as gaps (NaN) in their place; the rate is the
   recording's.
 
@@ -26,11 +26,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.console.decoding import input_suffix
-from spotlab.console.errors import CommandError
-from spotlab.console.npz import number, numeric_array, read_npz
-from spotlab.console.recorded_observations import frame_numbers, read_selspot, usable_counts
-from spotlab.console.tables import column, numbered, read_table
+from spotlab.processing.decoding import input_suffix
+from spotlab.processing.errors import InputError
+from spotlab.processing.npz import number, numeric_array, read_npz
+from spotlab.processing.recorded_observations import frame_numbers, read_selspot, usable_counts
+from spotlab.processing.tables import column, numbered, read_table
 
 __all__ = ["OBSERVATION_SUFFIXES", "MarkerObservations", "load_observations"]
 
@@ -73,12 +73,12 @@ def load_observations(path: Path) -> MarkerObservations:
 
     Raises
     ------
-    CommandError
+    InputError
         For a missing file, an unknown suffix or a file that does not hold what its
         format needs (naming the cause).
     """
     if not path.is_file():
-        raise CommandError(f"{path}: no such file")
+        raise InputError(f"{path}: no such file")
     suffix = input_suffix(path)
     if suffix == ".npz":
         return _load_npz(path)
@@ -86,7 +86,7 @@ def load_observations(path: Path) -> MarkerObservations:
         return _load_csv(path)
     if suffix == ".spj":
         return _load_recording(path)
-    raise CommandError(
+    raise InputError(
         f"{path}: unknown observation format {suffix!r} ({', '.join(OBSERVATION_SUFFIXES)})"
     )
 
@@ -94,13 +94,13 @@ def load_observations(path: Path) -> MarkerObservations:
 def _load_npz(path: Path) -> MarkerObservations:
     arrays = read_npz(path)
     if "uv" not in arrays:
-        raise CommandError(f"{path}: missing array 'uv' (F, C, M, 2)")
+        raise InputError(f"{path}: missing array 'uv' (F, C, M, 2)")
     uv = numeric_array(path, "uv", arrays["uv"])
     if uv.ndim != 4 or uv.shape[-1] != 2 or 0 in uv.shape:
-        raise CommandError(f"{path}: 'uv' must have shape (F, C, M, 2), not {uv.shape}")
+        raise InputError(f"{path}: 'uv' must have shape (F, C, M, 2), not {uv.shape}")
     rate = number(path, "rate", arrays["rate"]) if "rate" in arrays else None
     if rate is not None and not (np.isfinite(rate) and rate > 0):
-        raise CommandError(f"{path}: 'rate' must be a positive number of frames per second")
+        raise InputError(f"{path}: 'rate' must be a positive number of frames per second")
     labels = [str(x) for x in arrays["labels"].ravel()] if "labels" in arrays else None
     names = [str(x) for x in arrays["camera_names"].ravel()] if "camera_names" in arrays else None
     return MarkerObservations(uv, rate, labels, names)

@@ -39,12 +39,12 @@ from spotlab.calibration.wand_finder import (
     survey_wand,
 )
 from spotlab.calibration.wand_relabel import relabel_two_ends
-from spotlab.console.blob_trajectories import read_blob_recording
-from spotlab.console.calibration_inputs import WandObservations
-from spotlab.console.errors import CommandError
-from spotlab.console.tables import column, read_table
 from spotlab.drivers.centroid import BLOB_MERGED, BlobFrames
 from spotlab.geometry import Rig
+from spotlab.processing.blob_trajectories import read_blob_recording
+from spotlab.processing.calibration_inputs import WandObservations
+from spotlab.processing.errors import InputError
+from spotlab.processing.tables import column, read_table
 
 __all__ = ["RATIO_MISMATCH", "SENSOR_SIZES", "BlobCalibrationInputs", "load_blob_recordings"]
 
@@ -148,10 +148,10 @@ def _usable(blobs: BlobFrames) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
 def _image_size(blobs: BlobFrames, given: Sequence[int] | None) -> tuple[FloatArray, str]:
     if given is not None:
         if len(given) != 2 or min(given) <= 0:
-            raise CommandError(f"--image-size takes a positive width and height, got {given}")
+            raise InputError(f"--image-size takes a positive width and height, got {given}")
         return np.asarray(given, dtype=np.float64), "--image-size"
     if blobs.uv.shape[0] == 0:
-        raise CommandError("the wand recording holds no blob: give --image-size W H")
+        raise InputError("the wand recording holds no blob: give --image-size W H")
     u, v = np.max(blobs.uv, axis=0)
     for w, h in SENSOR_SIZES:
         if u <= w - 1 and v <= h - 1:
@@ -159,7 +159,7 @@ def _image_size(blobs: BlobFrames, given: Sequence[int] | None) -> tuple[FloatAr
                 "the smallest common sensor size holding every blob (give --image-size W H "
                 "otherwise)"
             )
-    raise CommandError(f"blobs reach ({u:.0f}, {v:.0f}) px: give --image-size W H")
+    raise InputError(f"blobs reach ({u:.0f}, {v:.0f}) px: give --image-size W H")
 
 
 def _frame_points(path: Path) -> FloatArray:
@@ -167,9 +167,9 @@ def _frame_points(path: Path) -> FloatArray:
     points = np.stack([column(header, values, a, path) for a in "XYZ"], axis=1)
     empty = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if empty.size:
-        raise CommandError(f"{path}: row {empty[0] + 2} lacks a coordinate")
+        raise InputError(f"{path}: row {empty[0] + 2} lacks a coordinate")
     if not 3 <= points.shape[0] <= 8:
-        raise CommandError(f"{path}: {points.shape[0]} markers; the reference object needs 3 to 8")
+        raise InputError(f"{path}: {points.shape[0]} markers; the reference object needs 3 to 8")
     return np.asarray(points)
 
 
@@ -185,31 +185,31 @@ def _wand_layout(
     if middle_mm is None:
         if survey.three_in_line > survey.two:
             if not seen < 0.5 - RATIO_TOLERANCE:
-                raise CommandError(
+                raise InputError(
                     f"{path}: the wand's middle marker sits at {seen:.2f} of its length, too "
                     "near the centre to tell its ends apart"
                 )
             return 3, seen, seen
         return 2, None, seen
     if not 0 < middle_mm < length:
-        raise CommandError(
+        raise InputError(
             f"--wand-middle {middle_mm:g} mm must lie between the wand's ends (0 and "
             f"--wand-length {length:g} mm)"
         )
     ratio = min(middle_mm, length - middle_mm) / length
     if np.isnan(seen) or survey.three_in_line < survey.two:
-        raise CommandError(
+        raise InputError(
             f"{path}: --wand-middle names a 3-marker wand, but the cameras see two markers in "
             f"{survey.two} images and three on a line in {survey.three_in_line}"
         )
     if abs(ratio - seen) > RATIO_MISMATCH:
-        raise CommandError(
+        raise InputError(
             f"the wand does not match the recording: --wand-middle {middle_mm:g} and "
             f"--wand-length {length:g} mm put the middle marker at {ratio:.3f} of the wand, "
             f"the recording shows it at {seen:.3f}; check the wand's dimensions"
         )
     if not ratio < 0.5 - RATIO_TOLERANCE:
-        raise CommandError(
+        raise InputError(
             f"--wand-middle {middle_mm:g} mm is too near the centre of a {length:g} mm wand "
             "to tell its ends apart"
         )
@@ -246,20 +246,20 @@ def load_blob_recordings(
 
     Raises
     ------
-    CommandError
+    InputError
         Naming the cause: a recording of another kind or without frames, cameras that
         differ between the recordings, a points table that is not 3-8 rows of X, Y, Z,
         a wand whose middle ratio does not match the recording, a reference object found
         by fewer than two cameras.
     """
     if not wand_length > 0:
-        raise CommandError(f"--wand-length must be a positive length in mm, got {wand_length}")
+        raise InputError(f"--wand-length must be a positive length in mm, got {wand_length}")
     points = _frame_points(frame_points_csv)
     wand_rec = read_blob_recording(wand_recording).blobs
     frame_rec = read_blob_recording(frame_recording).blobs
     C = wand_rec.n_cameras
     if frame_rec.n_cameras != C:
-        raise CommandError(
+        raise InputError(
             f"{frame_recording}: {frame_rec.n_cameras} cameras, the wand recording has {C}"
         )
     size, source = _image_size(wand_rec, image_size)
@@ -277,7 +277,7 @@ def load_blob_recordings(
     found = [s == FOUND for s in frame.status]
     if sum(found) < 2:
         detail = ", ".join(f"cam{c + 1} {s}" for c, s in enumerate(frame.status))
-        raise CommandError(
+        raise InputError(
             f"{frame_recording}: the reference object's {points.shape[0]} markers were told "
             f"apart in {sum(found)} camera(s), 2 at least are needed ({detail}); is it the "
             f"object of {frame_points_csv}, standing still?"

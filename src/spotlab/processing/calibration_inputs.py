@@ -18,7 +18,7 @@ Recordings, in detail:
 
 - Markers, detector counts, the image size of 4096 x 4096 counts and the readings
   dropped (not valid, saturated, clipped at the edge) are as in
-  :mod:`spotlab.console.recorded_observations`.
+  :mod:`spotlab.processing.recorded_observations`.
 - The reference object must not move: a marker whose readings in a camera spread more
   than :data:`STATIC_SD_MAX` counts (SD) is refused.
 """
@@ -32,12 +32,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.console.errors import CommandError
-from spotlab.console.npz import number, numeric_array, read_npz
-from spotlab.console.recorded_observations import PSD_IMAGE_SIZE, read_selspot, usable_counts
-from spotlab.console.tables import camera_count as _cameras
-from spotlab.console.tables import column as _column
-from spotlab.console.tables import read_table as _table
+from spotlab.processing.errors import InputError
+from spotlab.processing.npz import number, numeric_array, read_npz
+from spotlab.processing.recorded_observations import PSD_IMAGE_SIZE, read_selspot, usable_counts
+from spotlab.processing.tables import camera_count as _cameras
+from spotlab.processing.tables import column as _column
+from spotlab.processing.tables import read_table as _table
 
 __all__ = ["WandObservations", "load_csv", "load_npz", "load_recordings"]
 
@@ -66,7 +66,7 @@ def load_npz(path: Path) -> WandObservations:
     arrays = read_npz(path)
     missing = {"wand", "frame", "frame_points", "image_size"} - set(arrays)
     if missing:
-        raise CommandError(f"{path}: missing array(s) {', '.join(sorted(missing))}")
+        raise InputError(f"{path}: missing array(s) {', '.join(sorted(missing))}")
     names = [str(n) for n in arrays["names"]] if "names" in arrays else None
     length = number(path, "wand_length", arrays["wand_length"]) if "wand_length" in arrays else None
     return WandObservations(
@@ -91,7 +91,7 @@ def load_csv(wand_csv: Path, frame_csv: Path, image_size: Sequence[int]) -> Wand
                 wand[:, c, e, k] = _column(header, values, name, wand_csv)
     fheader, fvalues = _table(frame_csv)
     if _cameras(fheader, r"cam(\d+)_u", frame_csv) != C:
-        raise CommandError(f"{frame_csv}: the reference table must have the wand's {C} cameras")
+        raise InputError(f"{frame_csv}: the reference table must have the wand's {C} cameras")
     points = np.stack([_column(fheader, fvalues, a, frame_csv) for a in "XYZ"], axis=1)
     frame = np.stack(
         [
@@ -111,12 +111,12 @@ def _selspot_readings(path: Path) -> tuple[FloatArray, NDArray[np.uint8]]:
 def _recorded_markers(path: Path, markers: Sequence[int], option: str) -> FloatArray:
     """Detector counts (F, C, len(markers), 2) of the named markers (1-based), NaN if unusable."""
     if len(set(markers)) != len(markers):
-        raise CommandError(f"{option}: a marker is named twice ({list(markers)})")
+        raise InputError(f"{option}: a marker is named twice ({list(markers)})")
     data, flags = _selspot_readings(path)
     M = data.shape[1]
     bad = [m for m in markers if not 1 <= m <= M]
     if bad:
-        raise CommandError(f"{option}: marker(s) {bad} not in {path} (it has markers 1..{M})")
+        raise InputError(f"{option}: marker(s) {bad} not in {path} (it has markers 1..{M})")
     idx = [m - 1 for m in markers]
     return usable_counts(data[:, idx], flags[:, idx]).transpose(0, 2, 1, 3)
 
@@ -131,7 +131,7 @@ def _static_mean(static: FloatArray, markers: Sequence[int], path: Path) -> Floa
     sd = np.sqrt((spread**2).sum(axis=0) / np.maximum(n - 1, 1)).max(axis=-1)  # (C, P)
     if (sd > STATIC_SD_MAX).any():
         c, p = (int(i) for i in np.unravel_index(int(np.argmax(sd)), sd.shape))
-        raise CommandError(
+        raise InputError(
             f"{path}: marker {markers[p]} moves in camera {c + 1} (SD {sd[c, p]:.0f} counts > "
             f"{STATIC_SD_MAX:g}); the reference object must stand still"
         )
@@ -168,26 +168,26 @@ def load_recordings(
 
     Raises
     ------
-    CommandError
+    InputError
         Naming the cause: not two wand markers, a marker named twice or not in the
         recording, a recording without frames, of another family or of several devices,
         a moving reference object, a points table whose rows do not match the markers.
     """
     if len(wand_markers) != 2:
-        raise CommandError("--wand-markers takes the two marker numbers of the wand's ends")
+        raise InputError("--wand-markers takes the two marker numbers of the wand's ends")
     header, values = _table(frame_points_csv)
     points = np.stack([_column(header, values, a, frame_points_csv) for a in "XYZ"], axis=1)
     if points.shape[0] != len(frame_markers):
-        raise CommandError(
+        raise InputError(
             f"{frame_points_csv}: {points.shape[0]} rows for {len(frame_markers)} frame markers"
         )
     empty = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if empty.size:
-        raise CommandError(f"{frame_points_csv}: row {empty[0] + 2} lacks a coordinate")
+        raise InputError(f"{frame_points_csv}: row {empty[0] + 2} lacks a coordinate")
     wand = _recorded_markers(wand_recording, wand_markers, "--wand-markers")
     static = _recorded_markers(frame_recording, frame_markers, "--frame-markers")
     if static.shape[1] != wand.shape[1]:
-        raise CommandError(
+        raise InputError(
             f"{frame_recording}: {static.shape[1]} cameras, the wand recording has {wand.shape[1]}"
         )
     frame = _static_mean(static, frame_markers, frame_recording)

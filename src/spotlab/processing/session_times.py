@@ -1,7 +1,8 @@
 """Session times of a recording: decode it, find the timer, build the time base, write CSV.
 
-Used by ``spotlab export --timestamps`` and ``spotlab replay``
-(:func:`spotlab.acquisition.timebase.session_timebase` does the numerics).
+The first step of the processing of a recording; ``spotlab export --timestamps`` and
+``spotlab replay`` use it (:func:`spotlab.acquisition.timebase.session_timebase` does the
+numerics).
 """
 
 from __future__ import annotations
@@ -21,13 +22,13 @@ from spotlab.acquisition.timebase import (
     TimerFrames,
     session_timebase,
 )
-from spotlab.console.decoding import decoder_for
-from spotlab.console.errors import CommandError
 from spotlab.core.errors import RecordingError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.timer import extract_edges
 from spotlab.io.journal import JournalReader, is_journal
+from spotlab.processing.decoding import decoder_for
+from spotlab.processing.errors import InputError
 
 TIMER_FAMILY = "timer"
 #: Session metadata key of the timer's input wiring (stream name -> input), written by
@@ -56,7 +57,7 @@ def decode_streams(path: str | os.PathLike[str]) -> DecodedStreams:
 
     Raises
     ------
-    CommandError
+    InputError
         If the recording holds no decoded frames.
     """
     blocks: dict[str, list[FrameBlock]] = {}
@@ -66,7 +67,7 @@ def decode_streams(path: str | os.PathLike[str]) -> DecodedStreams:
             blocks.setdefault(state.name, []).append(block)
             meta[state.name] = state.metadata
     if not blocks:
-        raise CommandError(f"{path}: the recording holds no decoded frames")
+        raise InputError(f"{path}: the recording holds no decoded frames")
     return DecodedStreams(blocks, meta)
 
 
@@ -79,7 +80,7 @@ def read_streams(
 
     Raises
     ------
-    CommandError
+    InputError
         If the recording holds no decoded frames, or several timer streams.
     """
     decoded = decode_streams(path) if decoded is None else decoded
@@ -90,7 +91,7 @@ def read_streams(
     for name, bl in blocks.items():
         spec_d = meta[name].get("spec")
         if not isinstance(spec_d, dict):
-            raise CommandError(f"{path}: stream {name!r} has no spec in its metadata")
+            raise InputError(f"{path}: stream {name!r} has no spec in its metadata")
         spec = StreamSpec.from_dict(spec_d)
         specs[name] = spec
         seq, ticks, arrival = (
@@ -107,7 +108,7 @@ def read_streams(
         else:
             devices.append(DeviceFrames(name, seq, ticks, arrival, spec))
     if len(timers) > 1:
-        raise CommandError(
+        raise InputError(
             f"{path}: several timer streams ({', '.join(t.name for t in timers)}); "
             "one timer is the session's reference"
         )
@@ -119,7 +120,7 @@ def recorded_wiring(path: str | os.PathLike[str]) -> dict[str, int]:
     try:
         session = JournalReader(path).session
     except RecordingError as exc:
-        raise CommandError(str(exc)) from None
+        raise InputError(str(exc)) from None
     stored = session.get(WIRING_KEY)
     if not isinstance(stored, dict):
         return {}
@@ -146,12 +147,12 @@ def calibration_for(path: str | os.PathLike[str], given: Path | None) -> Path:
 
     Raises
     ------
-    CommandError
+    InputError
         When neither gives one.
     """
     rig = given if given is not None else recorded_rig(path)
     if rig is None:
-        raise CommandError(
+        raise InputError(
             f"{path}: reconstructing it needs --calibration RIG.toml (the recording names "
             "no rig: it was not made with a lab file that has one)"
         )
@@ -175,22 +176,6 @@ def recording_timebase(
     ``wiring``, the wiring the recording stores (:func:`recorded_wiring`) is used."""
     devices, timer, _ = read_streams(path)
     return session_timebase(devices, timer, effective_wiring(path, wiring))
-
-
-def parse_wiring(items: list[str]) -> dict[str, int]:
-    """``STREAM=INPUT`` options as a mapping; CommandError when malformed."""
-    out: dict[str, int] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            if not sep or not name:
-                raise ValueError
-            out[name] = int(value)
-        except ValueError:
-            raise CommandError(
-                f"--wiring {item!r}: expected STREAM=INPUT, e.g. selspot0=0"
-            ) from None
-    return out
 
 
 def write_timestamps(path: Path, timebase: SessionTimebase) -> int:

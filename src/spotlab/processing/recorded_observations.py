@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 
 from spotlab.acquisition.live.readings import FLAG_SATURATED, PSD_MAX_COUNT, usable_counts
 from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for
-from spotlab.console.errors import CommandError
 from spotlab.core.wire import StreamDecoder
+from spotlab.processing.decoding import decoder_for
+from spotlab.processing.errors import InputError
 
 __all__ = [
     "FLAG_SATURATED",
@@ -77,7 +77,7 @@ def read_selspot(path: Path) -> SelspotRecording:
 
     Raises
     ------
-    CommandError
+    InputError
         For a recording of several devices, of another family, or without frames.
     """
     metas: list[dict[str, Any]] = []
@@ -94,17 +94,17 @@ def read_selspot(path: Path) -> SelspotRecording:
         flags.append(block.flags)
         ticks.append(block.ticks)
     if len(names) > 1:
-        raise CommandError(
+        raise InputError(
             f"{path}: {len(names)} streams ({', '.join(sorted(names))}); spotlab reads "
             "recordings of one device here"
         )
     families = [m.get("family") for m in metas]
     if any(f != "selspot" for f in families):
-        raise CommandError(
+        raise InputError(
             f"{path}: a {families[0]!r} recording; only selspot (PSD) recordings are read here"
         )
     if not data or sum(len(d) for d in data) == 0:
-        raise CommandError(f"{path}: the recording holds no frames")
+        raise InputError(f"{path}: the recording holds no frames")
     spec = metas[-1].get("spec") or {}
     return SelspotRecording(
         np.concatenate(data),
@@ -120,17 +120,17 @@ def frame_numbers(recording: SelspotRecording, path: Path) -> NDArray[np.intp]:
 
     Raises
     ------
-    CommandError
+    InputError
         If the stream's rates are unknown or its time stamps go backwards (a device
         reset in the middle of the recording).
     """
     rate, tick_hz = recording.rate_hz, recording.tick_hz
     if not (np.isfinite(rate) and rate > 0 and np.isfinite(tick_hz) and tick_hz > 0):
-        raise CommandError(f"{path}: the recording does not state its frame and tick rates")
+        raise InputError(f"{path}: the recording does not state its frame and tick rates")
     elapsed = (recording.ticks - recording.ticks[0]).astype(np.float64) / tick_hz
     number = np.rint(elapsed * rate).astype(np.intp)
     if (np.diff(number) <= 0).any():
-        raise CommandError(
+        raise InputError(
             f"{path}: device time stamps go backwards or repeat (a reset during the "
             "recording?); split the recording at the reset"
         )

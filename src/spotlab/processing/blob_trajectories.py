@@ -1,7 +1,7 @@
 """A video-centroid recording + calibration + marker model -> labelled trajectories.
 
 The blob path of ``spotlab reconstruct`` and ``spotlab export`` (the SELSPOT path is
-:mod:`spotlab.console.trajectories`). A recording of one ``blobs2d`` stream (a CEN hub,
+:mod:`spotlab.processing.trajectories`). A recording of one ``blobs2d`` stream (a CEN hub,
 docs/protocols/centroid.md) holds unidentified blobs per camera and frame; they are
 decoded with the stream's driver, joined into
 :class:`~spotlab.drivers.centroid.BlobFrames`, and identified frame by frame with
@@ -30,9 +30,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.acquisition.replay import replay
-from spotlab.console.decoding import decoder_for, input_suffix
-from spotlab.console.errors import CommandError
-from spotlab.console.progress import Progress
 from spotlab.core.errors import CalibrationError, ReconstructionError, RecordingError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.wire import StreamDecoder
@@ -40,6 +37,9 @@ from spotlab.drivers.centroid import BLOB_MERGED, BlobFrames, blobs_from_blocks
 from spotlab.geometry import Rig
 from spotlab.io import Trial
 from spotlab.io.journal import JournalReader
+from spotlab.processing.decoding import decoder_for, input_suffix
+from spotlab.processing.errors import InputError
+from spotlab.processing.progress import ProgressSink
 from spotlab.reconstruction.identification import (
     FLOODED,
     NO_BLOBS,
@@ -57,7 +57,6 @@ __all__ = [
     "is_blob_recording",
     "load_model",
     "model_metadata",
-    "print_blob_summary",
     "read_blob_recording",
 ]
 
@@ -144,7 +143,7 @@ def read_blob_recording(path: Path) -> BlobRecording:
 
     Raises
     ------
-    CommandError
+    InputError
         For a file that is not a recording, several streams, another stream kind, no
         frames, or camera frame counters that go backwards (a restart).
     """
@@ -162,21 +161,21 @@ def read_blob_recording(path: Path) -> BlobRecording:
             names.add(name)
             blocks.append(block)
     except RecordingError as exc:
-        raise CommandError(f"{path}: {exc}") from None
+        raise InputError(f"{path}: {exc}") from None
     if len(names) > 1:
-        raise CommandError(
+        raise InputError(
             f"{path}: {len(names)} streams ({', '.join(sorted(names))}); the blob path reads "
             "recordings of one video-centroid hub"
         )
     specs = [m.get("spec") or {} for m in metas]
     if any(s.get("kind") != BLOB_KIND for s in specs):
-        raise CommandError(f"{path}: not a video-centroid ({BLOB_KIND}) recording")
+        raise InputError(f"{path}: not a video-centroid ({BLOB_KIND}) recording")
     blobs = blobs_from_blocks(blocks)
     if blobs.n_frames == 0:
-        raise CommandError(f"{path}: the recording holds no frames")
+        raise InputError(f"{path}: the recording holds no frames")
     rate = float(specs[-1].get("rate_hz", np.nan))
     if not (np.isfinite(rate) and rate > 0):
-        raise CommandError(f"{path}: the recording does not state its frame rate")
+        raise InputError(f"{path}: the recording does not state its frame rate")
     model = session.get(MODEL_KEY)
     return BlobRecording(
         blobs=blobs,
@@ -198,14 +197,14 @@ def _frame_numbers(blobs: BlobFrames, rate_hz: float, path: Path) -> NDArray[np.
 
     Raises
     ------
-    CommandError
+    InputError
         When no camera delivered a counter, or the hub's tick went backwards too (the hub
         itself restarted).
     """
     counter = np.where(blobs.offline, -1, blobs.camera_frame).max(axis=1)
     known = counter >= 0
     if not known.any():
-        raise CommandError(f"{path}: no camera delivered a frame counter")
+        raise InputError(f"{path}: no camera delivered a frame counter")
     ref = np.flatnonzero(known)
     near = ref[np.clip(np.searchsorted(ref, np.arange(known.size)), 0, ref.size - 1)]
     per_tick = rate_hz / 1e6  # frames per hub tick (µs)
@@ -215,7 +214,7 @@ def _frame_numbers(blobs: BlobFrames, rate_hz: float, path: Path) -> NDArray[np.
     for k in restart:  # each restart: shift the rest after frame k - 1 by the tick
         step = round(float(blobs.ticks[k] - blobs.ticks[k - 1]) * per_tick)
         if step <= 0:
-            raise CommandError(
+            raise InputError(
                 f"{path}: the hub's clock went backwards at frame {k} (the hub restarted "
                 "during the recording); split the recording at the restart"
             )
@@ -228,7 +227,7 @@ def model_metadata(path: Path) -> dict[str, Any]:
 
     Raises
     ------
-    CommandError
+    InputError
         For a missing or malformed model file.
     """
     return _model_from_file(path).to_json()
@@ -236,11 +235,11 @@ def model_metadata(path: Path) -> dict[str, Any]:
 
 def _model_from_file(path: Path) -> MarkerModel:
     if not path.is_file():
-        raise CommandError(f"{path}: no such marker model file")
+        raise InputError(f"{path}: no such marker model file")
     try:
         return MarkerModel.load(path)
     except ReconstructionError as exc:
-        raise CommandError(str(exc)) from None
+        raise InputError(str(exc)) from None
 
 
 def load_model(path: Path | None, recording: BlobRecording, source: Path) -> MarkerModel:
@@ -248,13 +247,13 @@ def load_model(path: Path | None, recording: BlobRecording, source: Path) -> Mar
 
     Raises
     ------
-    CommandError
+    InputError
         When neither gives one, or the one given is malformed.
     """
     if path is not None:
         return _model_from_file(path)
     if recording.model is None:
-        raise CommandError(
+        raise InputError(
             f"{source}: no marker model to name the markers: give --model MODEL.json, or "
             "record with spotlab record --model MODEL.json"
         )
@@ -264,7 +263,7 @@ def load_model(path: Path | None, recording: BlobRecording, source: Path) -> Mar
         try:
             return MarkerModel.load(file)
         except ReconstructionError as exc:
-            raise CommandError(f"{source}: its stored marker model is malformed ({exc})") from None
+            raise InputError(f"{source}: its stored marker model is malformed ({exc})") from None
 
 
 def _frames(blobs: BlobFrames) -> Iterator[tuple[BlobFrame, NDArray[np.bool_]]]:
@@ -288,7 +287,7 @@ def identify_recording(
     model: MarkerModel,
     *,
     rate_hz: float | None = None,
-    progress: Progress | None = None,
+    progress: ProgressSink | None = None,
 ) -> BlobTrajectories:
     """Label the markers of every frame of ``recording``.
 
@@ -301,8 +300,8 @@ def identify_recording(
         Names and rigid clusters of the markers.
     rate_hz : float, optional
         Frame rate; overrides the recording's.
-    progress : Progress, optional
-        Shown every few hundred frames.
+    progress : ProgressSink, optional
+        Told every few hundred frames.
 
     Returns
     -------
@@ -320,24 +319,24 @@ def identify_recording(
 
     Raises
     ------
-    CommandError
+    InputError
         When the rig's camera count differs from the recording's, or the identification
         finds that the calibration does not match the cameras.
     """
     blobs = recording.blobs
     C, F = blobs.n_cameras, blobs.n_frames
     if len(rig) != C:
-        raise CommandError(
+        raise InputError(
             f"the recording has {C} cameras but the calibration has {len(rig)}: give the "
             "calibration of this hub's cameras"
         )
     rate = float(rate_hz if rate_hz is not None else recording.rate_hz)
     if not (np.isfinite(rate) and rate > 0):
-        raise CommandError(f"the frame rate must be a positive number of Hz, not {rate:g}")
+        raise InputError(f"the frame rate must be a positive number of Hz, not {rate:g}")
     try:
         identify = Identifier(rig, model)
     except ReconstructionError as exc:
-        raise CommandError(str(exc)) from None
+        raise InputError(str(exc)) from None
     M = len(model.labels)
     first = int(recording.frame_no[0])
     row = recording.frame_no - first
@@ -360,7 +359,7 @@ def identify_recording(
         try:
             result = identify(frame, unusable)
         except CalibrationError as exc:
-            raise CommandError(f"frame {int(recording.frame_no[f])}: {exc}") from None
+            raise InputError(f"frame {int(recording.frame_no[f])}: {exc}") from None
         points[row[f]] = result.points
         residual[f] = result.residual_px
         ghosts += result.ghosts
@@ -421,38 +420,3 @@ def _gaps(present: NDArray[np.bool_]) -> int:
     # A gap is a fall that a later rise closes: count the rises after the first fall.
     falls = np.cumsum(starts, axis=0) > 0
     return int((ends & falls).sum())
-
-
-def print_blob_summary(summary: dict[str, Any], outputs: list[Path]) -> None:
-    """The human-readable summary of a blob reconstruction on stdout."""
-    rms = summary["rms_ray_px"]
-    lost = summary["lost_frames"]
-    print(
-        f"identified {summary['frames']} frames x {summary['markers']} markers at "
-        f"{summary['rate_hz']:g} Hz ({summary['cameras']} cameras)"
-        + (f", {lost} frames lost in the recording" if lost else "")
-    )
-    print(
-        f"  labelled           {100 * summary['labelled_fraction']:.2f} % of marker "
-        f"samples ({summary['markers_reconstructed']} markers seen, "
-        f"{summary['marker_gaps']} gaps)"
-    )
-    print(
-        f"  rejected           {summary['ghosts_rejected']} reflection points, "
-        f"{summary['unlabelled_per_frame']:g} unlabelled points per frame"
-    )
-    if summary["identification_restarts"]:
-        print(
-            f"  started afresh     {summary['identification_restarts']} times, after gaps "
-            f"of more than {MAX_LOST_FRAMES} lost frame"
-        )
-    print("  RMS ray residual   " + ("-" if rms is None else f"{rms:.3f} px"))
-    for name, counts in summary["camera_frames"].items():
-        bad = {k: v for k, v in counts.items() if v}
-        if bad:
-            print(
-                f"  {name:<18} "
-                + ", ".join(f"{k.replace('_', ' ')} {v} frames" for k, v in bad.items())
-            )
-    for path in outputs:
-        print(f"  wrote              {path}")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.console.errors import CommandError
+from spotlab.processing.errors import InputError
 
 __all__ = ["number", "numeric_array", "read_npz"]
 
@@ -18,7 +18,7 @@ def read_npz(path: Path) -> dict[str, NDArray[np.generic]]:
 
     Raises
     ------
-    CommandError
+    InputError
         The file is not an npz archive, or it holds object arrays (pickled Python
         objects, which spotlab does not load: they can run code).
     """
@@ -31,29 +31,27 @@ def read_npz(path: Path) -> dict[str, NDArray[np.generic]]:
                 except ValueError as exc:
                     if "pickle" not in str(exc):
                         raise
-                    raise CommandError(
+                    raise InputError(
                         f"{path}: array {name!r} holds Python objects (pickled), which "
                         "spotlab does not load; save it as numbers or strings"
                     ) from None
-    except CommandError:
+    except InputError:
         raise
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise CommandError(f"{path}: not a readable npz file ({exc})") from None
+        raise InputError(f"{path}: not a readable npz file ({exc})") from None
     return arrays
 
 
 def numeric_array(path: Path, name: str, array: NDArray[np.generic]) -> NDArray[np.float64]:
-    """``array`` as float64, or a CommandError naming the array that is not numeric."""
+    """``array`` as float64, or a InputError naming the array that is not numeric."""
     if array.dtype.kind not in "biuf":
-        raise CommandError(
-            f"{path}: array {name!r} must hold numbers, not {array.dtype.name} values"
-        )
+        raise InputError(f"{path}: array {name!r} must hold numbers, not {array.dtype.name} values")
     return np.asarray(array, dtype=np.float64)
 
 
 def number(path: Path, name: str, array: NDArray[np.generic]) -> float:
-    """The one number held by ``array``, or a CommandError naming it."""
+    """The one number held by ``array``, or a InputError naming it."""
     values = numeric_array(path, name, array)
     if values.size != 1:
-        raise CommandError(f"{path}: {name!r} must be one number, not {values.size} values")
+        raise InputError(f"{path}: {name!r} must be one number, not {values.size} values")
     return float(values.ravel()[0])
