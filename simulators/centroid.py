@@ -219,6 +219,10 @@ class CentroidDevice(Mcs1Device[CenConfig]):
             raise ValueError(f"markers must be >= 1, got {markers}")
         self.model = model if model is not None else BlobModel()
         self.body = body_for(body_motion, seed)
+        #: A ROM subject follows the operator: it stands in the neutral pose until the
+        #: capture starts (the first ``START:``), and its course runs from there.
+        self.follows_start = body_motion == "rom" and motion is None
+        self.body_origin_s: float | None = None if self.follows_start else 0.0
         self.motion = motion
         if motion is not None:
             markers = motion.n_markers
@@ -265,7 +269,7 @@ class CentroidDevice(Mcs1Device[CenConfig]):
             k, m = t.size, self.n_markers
             pos = self.motion.sample(np.repeat(t, m), np.tile(np.arange(m, dtype=np.int64), k))
             return np.asarray(pos.reshape(k, m, 3))
-        X = self.body.all_markers(t)
+        X = self.body.all_markers(t - (self.body_origin_s or 0.0))
         if self.n_markers <= 40:
             return X[:, : self.n_markers]
         extra = self._static.positions(0.0)[: self.n_markers - 40]
@@ -338,6 +342,8 @@ class CentroidDevice(Mcs1Device[CenConfig]):
             raise CommandError(0x80)
 
     def _new_stream(self, t: int, index: int) -> Mcs1Stream:
+        if self.body_origin_s is None:  # the first START: a ROM subject begins now
+            self.body_origin_s = (t - self.clock.epoch_ns) * 1e-9
         return CentroidStream(self, CenConfig(**self._config.__dict__), t, index)
 
     # -- CEN verbs -----------------------------------------------------------------

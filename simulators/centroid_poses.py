@@ -8,8 +8,10 @@ seed: size, marker placement, soft tissue — in two motions besides the walk:
 * ``static``: standing in a neutral pose (legs straight, arms hanging slightly away
   from the trunk) on a spot and with a heading drawn from the seed, swaying a few mm;
 * ``rom``: on the same spot, first 1 s standing in the neutral pose (as a ROM trial
-  starts), then, eased in over 1 s, stepping in place while turning slowly (0.08 turn
-  a second): the walk's joints (:class:`~spotlab.simulators.motions.Gait`) through
+  starts; on a hub, time 0 is the capture's start, see
+  :class:`~spotlab.simulators.centroid.CentroidDevice`), then, eased in over 1 s,
+  stepping in place while turning slowly (0.08 turn a second): the walk's joints
+  (:class:`~spotlab.simulators.motions.Gait`) through
   wider ranges (hip flexion +-0.55 rad, knee flexion to 0.8 rad, foot pitch following
   the shank +-0.15 rad, shoulder flexion +-0.5 rad; the walk's: +-0.4, 0.55, -, +-0.35)
   at 0.8 strides a second, and the joints the walk keeps still: elbow flexion 0.2 to
