@@ -48,6 +48,18 @@ SEGMENT_MARKERS = {
 }  # fmt: skip
 
 
+#: Lowest height of a marker's centre (mm): a marker on a shoe pressed to the floor.
+FLOOR_MARKER_MM = 5.0
+
+
+def _on_the_floor(X: F64) -> F64:
+    """Markers (..., 3) mm with none below ``FLOOR_MARKER_MM``: a toe marker placed
+    low on a subject's shoe rests on the floor instead of passing through it."""
+    out = np.array(X, dtype=np.float64)
+    out[..., 2] = np.maximum(out[..., 2], FLOOR_MARKER_MM)
+    return out
+
+
 @dataclass(frozen=True)
 class Subject:
     """What makes one simulated subject differ from the nominal body.
@@ -164,14 +176,14 @@ class GaitBody(Motion):
         extra["STRN"] = extra["CLAV"] - 170 * up + 20 * fwd
         X = np.concatenate([g, np.stack([extra[k] for k in EXTRA_LABELS], 1)], axis=1)
         if self.subject is None:
-            return X
+            return _on_the_floor(X)
         # The subject: scaled about the point on the floor below the pelvis, markers
         # placed off their nominal spots and moving on the skin, in the body's frame.
         origin = 0.25 * (p["LASI"] + p["RASI"] + extra["LPSI"] + extra["RPSI"])
         origin[:, 2] = 0.0
         frame = np.stack([fwd, left, up], axis=1)  # (K, 3 axes, 3)
         local = self.subject.offsets_mm + self.subject.skin_mm(np.asarray(t, np.float64))
-        return np.asarray(
+        return _on_the_floor(
             origin[:, None, :]
             + self.subject.scale * (X - origin[:, None, :])
             + np.einsum("kmi,kij->kmj", local, frame)

@@ -16,7 +16,7 @@ seed: size, marker placement, soft tissue — in two motions besides the walk:
   the shank +-0.15 rad, shoulder flexion +-0.5 rad; the walk's: +-0.4, 0.55, -, +-0.35)
   at 0.8 strides a second, and the joints the walk keeps still: elbow flexion 0.2 to
   0.7 rad (the walk's 0.3), shoulder abduction -0.05 to 0.25 rad and hip abduction
-  -0.03 to 0.17 rad (the walk's 0), the pelvis 925-1005 mm high (the walk's 935-965;
+  -0.03 to 0.17 rad (the walk's 0), the pelvis 995-1075 mm high (the walk's 1005-1035;
   feet pressed into the floor stay on it, as in the walk).
 
 A ROM trial's ranges have to hold the motion later labelled with the model learnt from
@@ -107,7 +107,7 @@ class PosedBody(GaitBody):
             pose = {k: v + e[:, None] * (moving[k] - v) for k, v in pose.items()}
             heading = heading + 2 * np.pi * 0.08 * np.maximum(t - ROM_NEUTRAL_S, 0.0) * e
             ph = 2 * np.pi * ROM_STRIDE_HZ * t
-            pel_z = pel_z + e * (965.0 + 15.0 * np.cos(2 * ph) - 30 * np.cos(0.4 * ph) - pel_z)
+            pel_z = pel_z + e * (1035.0 + 15.0 * np.cos(2 * ph) - 30 * np.cos(0.4 * ph) - pel_z)
             sway = sway * (1 - e[:, None])
         g = body_pose(
             self.spot + sway, _unit(heading), pel_z, pose["hip"], pose["knee"], pose["foot"],

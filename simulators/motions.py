@@ -356,6 +356,12 @@ def body_pose(
     return np.concatenate([xy, up[..., None]], axis=2)
 
 
+#: Mean pelvis height of the walk (mm): the straight stance leg (hip 80 mm below the
+#: pelvis, thigh 450, shank 430) then leaves the ankle marker 55-85 mm above the floor
+#: and the heel and toe markers 10 mm or more; 70 mm lower, they went through it.
+WALKING_PELVIS_MM = 1020.0
+
+
 class Gait(Motion):
     """A body walking on a circle of ``radius`` mm at ``speed`` m/s, with 19 surface markers.
 
@@ -381,7 +387,7 @@ class Gait(Motion):
         hip = 0.4 * np.sin(p)
         knee = 0.55 * (1 - np.cos(p + 0.6)) / 2
         return body_pose(
-            base, fwd, 950.0 + 15.0 * np.cos(2 * ph), hip, knee, 0.5 * (hip - knee),
+            base, fwd, WALKING_PELVIS_MM + 15.0 * np.cos(2 * ph), hip, knee, 0.5 * (hip - knee),
             -0.35 * np.sin(p),
         )  # fmt: skip
 

@@ -24,8 +24,10 @@ __all__ = ["LINK_SPREAD_MM", "MODEL_SECONDS", "body_marker_model", "write_body_m
 
 #: Walk sampled to learn the model (s): more than three strides of the 0.9 Hz gait.
 MODEL_SECONDS = 4.0
-#: Marker pairs whose distance varies by less than this over the walk become links (mm).
-LINK_SPREAD_MM = 60.0
+#: Marker pairs whose distance varies by less than this over the walk become links (mm):
+#: the toe markers swing 60-80 mm against every other marker once they no longer slide
+#: along the floor.
+LINK_SPREAD_MM = 80.0
 
 
 def body_marker_model(markers: int = 40, seed: int = 0, *, rate_hz: float = 50.0) -> MarkerModel:

@@ -193,7 +193,93 @@ def assign_labels(
     for _ in range(3):  # labels found by links constrain the next markers
         if not _linked_labels(model, points, out, point_of, tol_mm, min_links):
             break
+    if _exchanged_labels(model, points, out, point_of, tol_mm, min_links):
+        _linked_labels(model, points, out, point_of, tol_mm, min_links)
     return out
+
+
+def _link_fit(
+    model: MarkerModel,
+    points: FloatArray,
+    point_of: IntArray,
+    marker: int,
+    candidates: IntArray,
+    tol_mm: float,
+    min_links: int,
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Which ``candidates`` (points) fit ``marker`` by its links to labelled markers
+    (all within range, ``tol_mm`` beyond, at least ``min_links`` of them), and how far
+    each sits from the middle of its ranges (RMS over the links, in half-widths)."""
+    i, j, lo, hi = model.intervals
+    sel = (i == marker) | (j == marker)
+    partner = np.where(i[sel] == marker, j[sel], i[sel])
+    have = point_of[partner] >= 0
+    if have.sum() < min_links:
+        return np.zeros(candidates.size, dtype=bool), np.full(candidates.size, np.inf)
+    lo_, hi_ = lo[sel][have], hi[sel][have]
+    d = np.linalg.norm(points[candidates][:, None] - points[point_of[partner[have]]][None], axis=2)
+    ok = ((d >= lo_ - tol_mm) & (d <= hi_ + tol_mm)).all(axis=1)
+    half = np.maximum(0.5 * (hi_ - lo_), tol_mm)
+    off = np.sqrt(np.mean(((d - 0.5 * (lo_ + hi_)) / half) ** 2, axis=1))
+    return ok, off
+
+
+def _exchanged_labels(
+    model: MarkerModel,
+    points: FloatArray,
+    labels: IntArray,
+    point_of: IntArray,
+    tol_mm: float,
+    min_links: int,
+) -> bool:
+    """Undo a label taken by the wrong one of two nearby markers; True if any was.
+
+    Markers on no segment are labelled by distance ranges alone, and two markers close
+    together with wide ranges (the two wrist markers) can both fit one point: the first
+    label taken may be the other marker's, and tracking then carries it while the right
+    point stays free (it fits the marker already taken, nothing else). For a labelled
+    marker ``m`` on no segment, with its point ``p``: when exactly one free point ``q``
+    fits ``m``, ``q`` fits no missing marker, ``p`` fits exactly one missing marker
+    ``m2``, and ``q`` sits nearer the middle of ``m``'s ranges than ``p`` does, the
+    labels become ``m`` on ``q`` and ``m2`` on ``p``: one more marker labelled, every
+    range kept.
+    """
+    owner = model.segment_of
+    changed = False
+    for m in np.flatnonzero((point_of >= 0) & (owner < 0)):
+        free = np.flatnonzero(labels < 0)
+        missing = np.flatnonzero(point_of < 0)
+        if free.size == 0 or missing.size == 0:
+            break
+        p = int(point_of[m])
+        point_of[m] = -1  # judged without its own label
+        q_ok, q_off = _link_fit(model, points, point_of, int(m), free, tol_mm, min_links)
+        here = np.array([p], dtype=np.intp)
+        _, p_off = _link_fit(model, points, point_of, int(m), here, tol_mm, min_links)
+        point_of[m] = p
+        if q_ok.sum() != 1 or not q_off[q_ok][0] < p_off[0]:
+            continue
+        q = int(free[q_ok][0])
+        point_of[m] = -1
+        p_fits = [
+            m2
+            for m2 in missing
+            if _link_fit(model, points, point_of, int(m2), here, tol_mm, min_links)[0][0]
+        ]
+        point_of[m] = p
+        if len(p_fits) != 1:
+            continue
+        q_fits_missing = any(
+            _link_fit(model, points, point_of, int(m2), np.array([q]), tol_mm, min_links)[0][0]
+            for m2 in missing
+        )
+        if q_fits_missing:
+            continue
+        m2 = int(p_fits[0])
+        labels[q], labels[p] = m, m2
+        point_of[m], point_of[m2] = q, p
+        changed = True
+    return changed
 
 
 def _linked_labels(

@@ -9,7 +9,7 @@ static distances (:meth:`Template.model`). M0 labels a range-of-motion (ROM) tri
 learns the final model from those labelled trajectories: segment layouts averaged over
 the trial (:meth:`MarkerModel.from_trajectories` with the template's segments), each
 link's range the one seen in the trial (its 0.5-99.5 percentiles: a few wrong
-labels do not widen it), widened by ``margin_mm``.
+labels do not widen it), widened by ``margin_mm`` and a tenth of its width.
 """
 
 from __future__ import annotations
@@ -42,8 +42,15 @@ FloatArray = NDArray[np.float64]
 
 #: Widening of M0's link ranges each way (mm): soft tissue and the static trial's sway.
 FIRST_MARGIN_MM = 15.0
-#: Widening of the learnt link ranges each way (mm).
+#: Widening of the learnt link ranges each way: this (mm) plus ``LEARN_SPREAD_MARGIN``
+#: times the range's own width. A wide range (a wrist to the other thigh) is one the
+#: ROM did not fill: another motion goes past its ends (a walk by 10-30 mm on links
+#: 100-300 mm wide, measured on subject 5), while a narrow range is a near-rigid pair.
 LEARN_MARGIN_MM = 5.0
+LEARN_SPREAD_MARGIN = 0.1
+#: Links whose learnt range starts beyond this (mm) are long (across the body) and take
+#: ``LEARN_SPREAD_MARGIN``; shorter ones tell nearby markers apart and keep theirs tight.
+LONG_LINK_MM = 300.0
 #: Percentiles of the distances seen left out at each end of a learnt range.
 TRIM_PERCENT = 0.5
 #: Other pairs whose distance varies less than this in the ROM trial become links (mm).
@@ -217,6 +224,7 @@ def learn_model(
     positions: Any,
     *,
     margin_mm: float = LEARN_MARGIN_MM,
+    spread_margin: float = LEARN_SPREAD_MARGIN,
     min_frames: int = MIN_LINK_FRAMES,
     trim_percent: float = TRIM_PERCENT,
     link_spread_mm: float | None = LINK_SPREAD_MM,
@@ -231,6 +239,8 @@ def learn_model(
         Labelled positions (mm) in ``model``'s label order, NaN where unlabelled.
     margin_mm : float
         Widening of every learnt link range, each way (mm).
+    spread_margin : float
+        Further widening each way, as a fraction of the range's own width.
     min_frames : int
         A link seen (both markers labelled) in fewer frames keeps ``model``'s range.
     trim_percent : float
@@ -275,7 +285,8 @@ def learn_model(
             continue
         lo, hi = np.percentile(d, [trim_percent, 100.0 - trim_percent])
         if linked[i, j] or (link_spread_mm is not None and hi - lo < link_spread_mm):
-            links.append(Link(int(i), int(j), max(0.0, lo - margin_mm), hi + margin_mm))
+            wide = margin_mm + (spread_margin * (hi - lo) if lo > LONG_LINK_MM else 0.0)
+            links.append(Link(int(i), int(j), max(0.0, lo - wide), hi + wide))
             linked[i, j] = linked[j, i] = False  # done
     links.extend(k for k in model.links if linked[k.a, k.b])  # too rarely seen: kept
     return MarkerModel(model.labels, tuple(segments), tuple(links))

@@ -72,28 +72,30 @@ def test_static_then_rom_then_the_walk_of_the_same_subject(subject: dict[str, An
     assert 1.05 < fit.scale < 1.25 and fit.rms_mm < 20.0
     assert first is not None and first.rms_mm < 8.0  # measured 3.4 mm
     right, wrong = _score(labelled, rom, m0.labels)
-    assert right > 0.99 and wrong < 0.001  # measured 99.84 %, 0
+    assert right > 0.995 and wrong < 0.0005  # measured 100 %, 0
     right, wrong = _score(walked, walk, final.labels)
-    assert right > 0.88 and wrong < 0.005  # measured 93.1 %, 0
+    # The targets of issue 11: >= 97 % of the marker-frames, <= 0.05 % wrong. Measured
+    # 98.65 %, 0 (benchmarks/new_subject.py, seeds 5-8: 97.5-98.9 %, 0).
+    assert right > 0.97 and wrong < 0.0005
 
 
 def test_a_rom_trial_is_labelled_from_where_the_subject_stands_in_the_static_pose(
     subject: dict[str, Any],
 ) -> None:
-    # The ROM's first 1.5 s backwards: the subject moves first and stands still at the
+    # The ROM's first 2.5 s backwards: the subject moves first and stands still at the
     # end (a recording started late sees the same: the pose comes later, or never).
     rom, m0 = subject["rom"], subject["m0"]
-    order = list(range(150, -1, -1))
+    order = list(range(250, -1, -1))
     frames = [(rom.frame(f), rom.unusable(f)) for f in order]
     labelled, first = label_trial(rom.rig, frames, m0, subject["start"])
     assert first is not None and first.rms_mm <= 5.0 and first.frame >= 100
     truth = rom.markers_mm[order][:, [rom.labels.index(x) for x in m0.labels]]
     reported = np.isfinite(labelled[..., 0])
     wrong = reported & (np.linalg.norm(labelled - truth, axis=2) >= 10.0)
-    # Measured: the pose found at frame 150 (RMS 3.4 mm); 100 % labelled, 0 wrong.
+    # Measured: the pose found at frame 145 (RMS 3.4 mm); 100 % labelled, 0 wrong.
     assert reported.mean() > 0.98 and wrong.sum() == 0
 
-    never = [(rom.frame(f), rom.unusable(f)) for f in range(150, 300)]
+    never = [(rom.frame(f), rom.unusable(f)) for f in range(200, 350)]
     with pytest.raises(ReconstructionError, match="fits none of the trial's first"):
         label_trial(rom.rig, never, m0, subject["start"])
 
