@@ -279,12 +279,11 @@ def test_a_new_subject_is_labelled_from_a_template_through_to_c3d(
     print("least covered:", {names[m]: round(float(right[decoded][:, m].mean()), 3)
                              for m in np.argsort(right[decoded].mean(axis=0))[:5]})  # fmt: skip
     # Targets (issue 11): >= 99.5 % right, <= 0.05 % wrong, >= 97 % coverage. Measured
-    # through this test (2 runs): 99.93-100 % right, 0-0.07 % wrong, 92.3-93.6 % coverage
-    # (LWRA and LWRB never labelled, ankles 77-88 %); in process on subjects 5-7
-    # (benchmarks/new_subject.py) 0 wrong, 93-97 %.
-    # The wrong-label and coverage targets are not met yet (docs/identification.md).
-    assert score["wrong_of_reported"] <= 0.002 and score["right_of_reported"] >= 0.995
-    assert score["coverage"] >= 0.9 and decoded.sum() >= 0.8 * WALK_S * 100
+    # through this test: 100 % right, 0 wrong, 97.76-98.08 % coverage (feet and wrists the
+    # least covered, 76-92 %); in process on subjects 5-8 (benchmarks/new_subject.py)
+    # 97.45-98.91 %, 0 wrong. The coverage bound leaves 1.5 points for the walk's window.
+    assert score["wrong_of_reported"] <= 0.0005 and score["right_of_reported"] >= 0.995
+    assert score["coverage"] >= 0.965 and decoded.sum() >= 0.8 * WALK_S * 100
 
 
 @pytest.mark.timeout(180)
