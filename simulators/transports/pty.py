@@ -43,7 +43,7 @@ MAX_WAIT_S = 0.05
 HOST_SLACK = 1 << 16
 #: A device more than this far behind real time (ns) catches up in steps of this length,
 #: writing to the port between them.
-CATCH_UP_NS = 100_000_000
+CATCH_UP_NS = 10_000_000
 
 
 def tty_baud(fd: int) -> int | None:
@@ -86,6 +86,7 @@ class PtyServer:
 
     def __init__(self, device: Mcs1Device, name: str = "selspot") -> None:
         self.device = device
+        device.host_polls = True  # its output is taken when this loop polls
         self._dir = Path(tempfile.mkdtemp(prefix="spotlab-sim-"))
         self.path = self._dir / name
         self.stats = {"bytes_out": 0, "bytes_in": 0, "overrun_bytes": 0, "reconnects": 0}
