@@ -22,6 +22,7 @@ falls back to the spec's one-candidate-at-a-time procedure.
 from __future__ import annotations
 
 import binascii
+import functools
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -83,8 +84,10 @@ class FrameBatch:
         return int(self.frames.shape[0])
 
 
+@functools.lru_cache(maxsize=64)
 def _header_crc_tables(frame_type: int, payload_len: int) -> tuple[int, npt.NDArray[np.uint16]]:
-    """Header CRC of a data frame as ``c0 ^ T[0][b3] ^ T[1][b4] ^ T[2][b5]``.
+    """Header CRC of a data frame as ``c0 ^ T[0][b3] ^ T[1][b4] ^ T[2][b5]``
+    (cached per configuration: every decoder of one frame layout shares them; read only).
 
     Only bytes 3 (version/flags) and 4-5 (seq) vary between the data frames of
     one configuration; CRC is affine in the message, so their contributions
@@ -98,6 +101,7 @@ def _header_crc_tables(frame_type: int, payload_len: int) -> tuple[int, npt.NDAr
             base[offset] = value
             tables[row, value] = _crc(bytes(base), CRC16_INIT) ^ c0
         base[offset] = 0
+    tables.setflags(write=False)
     return c0, tables
 
 
