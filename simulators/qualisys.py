@@ -34,6 +34,9 @@ from spotlab.simulators.qualisys_scene import QualisysScene, SceneFrame
 VERSIONS = ("1.25",)
 QTM_VERSION = "QTM Version is 2024.2 (build 0000, spotlab simulator)"
 WELCOME = "QTM RT Interface connected"
+#: Seconds between the reply to ``Start``/``Stop`` and the capture event (QTM's cameras
+#: take time to start; a client that waits for the event after the reply sees it).
+EVENT_DELAY_S = 0.05
 #: Fault kinds the QTM simulator injects.
 FAULT_KINDS = ("drop", "disconnect")
 
@@ -136,11 +139,12 @@ class QualisysServer:
 
     def stop(self) -> None:
         """Close every connection, stop serving, write the truth file if one was asked."""
+        if self._thread is None:
+            return
         if self._loop is not None and self._stopping is not None:
             self._loop.call_soon_threadsafe(self._stopping.set)
-        if self._thread is not None:
-            self._thread.join(10.0)
-            self._thread = None
+        self._thread.join(10.0)
+        self._thread = None
         if self.options.truth is not None:
             self.write_truth(self.options.truth)
 
@@ -310,7 +314,10 @@ class QualisysServer:
     def _error_reply(self, client: _Client, text: str) -> None:
         self._reply(client, text, qw.ERROR)
 
-    def _broadcast_event(self, event: int) -> None:
+    def _broadcast_event(self, event: int, delay_s: float = 0.0) -> None:
+        if delay_s > 0 and self._loop is not None:
+            self._loop.call_later(delay_s, self._broadcast_event, event)
+            return
         self.state = event
         for c in self._clients:
             c.writer.write(qw.event_packet(event))
@@ -358,10 +365,10 @@ class QualisysServer:
                 self._error_reply(client, "You must be master to issue this command")
             elif verb == "start":
                 self._reply(client, "Starting measurement")
-                self._broadcast_event(qw.EV_CAPTURE_STARTED)
+                self._broadcast_event(qw.EV_CAPTURE_STARTED, EVENT_DELAY_S)
             else:
                 self._reply(client, "Stopping measurement")
-                self._broadcast_event(qw.EV_CAPTURE_STOPPED)
+                self._broadcast_event(qw.EV_CAPTURE_STOPPED, EVENT_DELAY_S)
         else:
             self._error_reply(client, "Parse error")
 
