@@ -1,0 +1,165 @@
+"""The QTM driver end to end against the simulated QTM: ``spotlab record`` of 5 s keeps every
+frame, the journal decodes to the simulator's truth and to what Qualisys' own client (qtm-rt)
+decodes of the same frames; a refused version, the password flow, dropped frames and a
+disconnect with reconnection."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from spotlab.acquisition.replay import replay
+from spotlab.console.cli import main
+from spotlab.core.errors import DeviceError
+from spotlab.core.frames import FrameBlock
+from spotlab.drivers.qualisys import QualisysDriver
+from spotlab.processing.decoding import decoder_for
+from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
+
+
+def _vendor_client(
+    port: int, stop: threading.Event, out: dict[int, np.ndarray]
+) -> threading.Thread:
+    """Qualisys' qtm-rt client streaming 3D in a thread of its own until ``stop`` is set:
+    frame -> (M, 3)."""
+    qtm_rt = pytest.importorskip("qtm_rt")
+
+    def on_packet(p: Any) -> None:
+        _, markers = p.get_3d_markers()
+        out[p.framenumber] = np.array([[m.x, m.y, m.z] for m in markers])
+
+    async def session() -> None:
+        conn = await qtm_rt.connect("127.0.0.1", port=port)
+        await conn.stream_frames(components=["3d"], on_packet=on_packet)
+        while not stop.is_set():
+            await asyncio.sleep(0.05)
+        await conn.stream_frames_stop()
+        conn.disconnect()
+
+    thread = threading.Thread(target=asyncio.run, args=(session(),), daemon=True)
+    thread.start()
+    return thread
+
+
+def _replayed(path: Path) -> FrameBlock:
+    blocks = [b for _, b in replay(path, decoder_for) if len(b)]
+    return FrameBlock.concat(blocks)
+
+
+def test_record_5_s_equals_truth_and_vendor_client(tmp_path: Path, capsys: Any) -> None:
+    out = tmp_path / "q.spj"
+    options = QualisysSimOptions(markers=40, cameras=4, rate_hz=100.0, seed=2)
+    vendor: dict[int, np.ndarray] = {}
+    stop = threading.Event()
+    with QualisysServer(options) as server:
+        client = _vendor_client(server.port, stop, vendor)
+        code = main(
+            ["record", "--device", f"qualisys={server.address}", "--seconds", "5", "--out",
+             str(out)]
+        )  # fmt: skip
+        stop.set()
+        client.join(10)
+    assert code == 0, capsys.readouterr().err
+    truth = server.truth()
+    block = _replayed(out)
+    assert 480 <= len(block) <= 520
+    assert np.all(np.diff(block.seq) == 1)  # every frame kept
+    row = {int(n): i for i, n in enumerate(truth["frame"])}
+    rows = [row[int(s)] for s in block.seq]
+    assert np.array_equal(block.ticks, truth["timestamp_us"][rows])
+    true32 = truth["markers_mm"][rows].astype(np.float32)
+    assert np.array_equal(block.data[:, :, 0, :], true32)
+    both = [i for i, s in enumerate(block.seq) if int(s) in vendor]
+    assert len(both) == len(block)  # the client saw every frame recorded
+    theirs = np.array([vendor[int(block.seq[i])] for i in both])
+    assert np.array_equal(block.data[both, :, 0, :], theirs)
+    code = main(["info", str(out), "--json"])
+    assert code == 0
+    info = capsys.readouterr().out.strip().splitlines()[-1]
+    assert '"lost_frames": 0' in info and '"name": "qualisys"' in info
+
+
+def test_labels_and_bodies_in_the_recording(tmp_path: Path) -> None:
+    with QualisysServer(QualisysSimOptions(markers=12, rate_hz=50.0)) as server:
+        driver = QualisysDriver(server.address)
+        driver.start()
+        try:
+            got = None
+            while got is None:
+                got = driver.recv(2.0)
+        finally:
+            driver.close()
+    meta = driver.metadata()
+    assert meta["spec"]["metadata"]["labels"] == list(server.scene.labels)
+    assert meta["qtm"]["rate_hz"] == 50.0 and meta["spec"]["rate_hz"] == 50.0
+    assert meta["spec"]["kind"] == "point3d" and meta["spec"]["n_markers"] == 12
+    assert meta["spec"]["metadata"]["bodies"] == []  # the first 12 labels hold no cluster
+
+
+def test_version_refused_is_one_error_line(capsys: Any, tmp_path: Path) -> None:
+    options = QualisysSimOptions(markers=4, versions=("1.19",))
+    with QualisysServer(options) as server:
+        code = main(
+            ["record", "--device", f"qualisys={server.address}", "--seconds", "1", "--out",
+             str(tmp_path / "x.spj")]
+        )  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0
+    assert len(err) == 1 and err[0].startswith("spotlab: error:"), err
+    assert "1.25" in err[0] and "Version NOT supported" in err[0]
+
+
+def test_password_flow() -> None:
+    with QualisysServer(QualisysSimOptions(markers=4, password="pw")) as server:
+        wrong = QualisysDriver(server.address, password="nope")
+        with pytest.raises(DeviceError, match="Wrong or missing password"):
+            wrong.start()
+        wrong.close()
+        right = QualisysDriver(server.address, password="pw")
+        right.start()
+        assert right.recv(2.0) is not None
+        right.close()
+
+
+def test_dropped_frames_are_counted() -> None:
+    with QualisysServer(QualisysSimOptions(markers=4, rate_hz=200, faults="drop@0.2:3")) as server:
+        driver = QualisysDriver(server.address)
+        driver.start()
+        blocks = []
+        t_end = time.monotonic() + 0.6
+        while time.monotonic() < t_end:
+            b = driver.recv(0.1)
+            if b is not None:
+                blocks.append(b)
+        driver.close()
+    seq = FrameBlock.concat(blocks).seq
+    assert driver.stats.lost_frames == 3 and driver.stats.gaps == 1
+    assert np.count_nonzero(np.diff(seq) == 4) == 1
+
+
+def test_disconnect_and_reconnect(tmp_path: Path) -> None:
+    out = tmp_path / "d.spj"
+    options = QualisysSimOptions(markers=6, rate_hz=100.0, faults="disconnect@1:0.3")
+    with QualisysServer(options) as server:
+        code = main(
+            ["record", "--device", f"qualisys={server.address}", "--seconds", "3", "--out",
+             str(out)]
+        )  # fmt: skip
+        assert server.connections >= 2
+    assert code == 0
+    truth = server.truth()
+    block = _replayed(out)
+    jumps = np.flatnonzero(np.diff(block.seq) != 1)
+    assert len(jumps) == 1  # the outage, nothing else
+    outage = block.seq[jumps[0] + 1] - block.seq[jumps[0]]
+    assert 20 <= outage <= 60  # 0.3 s at 100 Hz and the retries
+    row = {int(n): i for i, n in enumerate(truth["frame"])}
+    rows = [row[int(s)] for s in block.seq]
+    assert np.array_equal(block.data[:, :, 0, :], truth["markers_mm"][rows].astype(np.float32))
+    assert 200 <= len(block) <= 300
