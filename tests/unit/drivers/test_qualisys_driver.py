@@ -19,6 +19,7 @@ from spotlab.console.cli import main
 from spotlab.core.errors import DeviceError
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers.qualisys import QualisysDriver
+from spotlab.io import TRIAL_READERS
 from spotlab.processing.decoding import decoder_for
 from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
 
@@ -163,3 +164,12 @@ def test_disconnect_and_reconnect(tmp_path: Path) -> None:
     rows = [row[int(s)] for s in block.seq]
     assert np.array_equal(block.data[:, :, 0, :], truth["markers_mm"][rows].astype(np.float32))
     assert 200 <= len(block) <= 300
+    # spotlab export --c3d: the labelled markers as they are, the outage as NaN rows
+    c3d = tmp_path / "d.c3d"
+    assert main(["export", str(out), "--c3d", str(c3d)]) == 0
+    trial = TRIAL_READERS[".c3d"](c3d)
+    assert trial.labels == list(server.scene.labels) and trial.point_rate == 100.0
+    assert trial.n_frames == block.seq[-1] - block.seq[0] + 1
+    kept = block.seq - block.seq[0]
+    assert np.allclose(trial.points[kept], block.data[:, :, 0, :], atol=1e-3)
+    assert np.isnan(trial.points[jumps[0] + 1 : jumps[0] + outage]).all()
