@@ -34,6 +34,8 @@ MARKER_MM = 12.0
 #: 2-D coordinates are sent in these units per pixel.
 SUBPIXELS = 64
 MAX_MARKERS = len(BODY_LABELS)
+#: Frames computed at once (the body model is vectorised over time).
+CHUNK = 64
 
 
 def cluster_pose(points: F64) -> tuple[F64, F64]:
@@ -107,6 +109,7 @@ class QualisysScene:
         ]
         self.body_names = tuple(name for name, _ in self.clusters)
         first = self.body.all_markers(np.zeros(1))[0, :markers]
+        self._chunk: tuple[int, F64, F64, F64] | None = None
         self._local = {}
         for name, idx in self.clusters:
             o, r = cluster_pose(first[idx][None])
@@ -121,14 +124,19 @@ class QualisysScene:
         return round((frame - 1) * 1e6 / self.rate_hz)
 
     def frame(self, frame: int) -> SceneFrame:
-        """The scene at frame number ``frame``."""
-        X = self.body.all_markers(np.array([self.time_s(frame)]))[0, : self.n_markers]
-        pos = np.zeros((len(self.clusters), 3))
-        rot = np.zeros((len(self.clusters), 3, 3))
-        for b, (_, idx) in enumerate(self.clusters):
-            o, r = cluster_pose(X[idx][None])
-            pos[b], rot[b] = o[0], r[0]
-        return SceneFrame(X, pos, rot)
+        """The scene at frame number ``frame`` (computed :data:`CHUNK` frames at a time)."""
+        first = frame - (frame - 1) % CHUNK
+        if self._chunk is None or self._chunk[0] != first:
+            times = (first - 1 + np.arange(CHUNK)) / self.rate_hz
+            X = self.body.all_markers(times)[:, : self.n_markers]
+            pos = np.zeros((CHUNK, len(self.clusters), 3))
+            rot = np.zeros((CHUNK, len(self.clusters), 3, 3))
+            for b, (_, idx) in enumerate(self.clusters):
+                pos[:, b], rot[:, b] = cluster_pose(X[:, idx])
+            self._chunk = (first, X, pos, rot)
+        _, X, pos, rot = self._chunk
+        k = frame - first
+        return SceneFrame(X[k], pos[k], rot[k])
 
     def view_2d(self, markers: F64) -> list[tuple[npt.NDArray[np.int32], npt.NDArray[np.uint16]]]:
         """Per camera, the markers in its image: sub-pixel (K, 2) and diameters (K, 2)."""

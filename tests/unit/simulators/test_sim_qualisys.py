@@ -253,3 +253,52 @@ def test_drop_and_disconnect_faults(tmp_path: Path) -> None:
     assert set(numbers) <= set(truth["frame"].tolist())
     assert not {numbers[gaps[0]] + k for k in (1, 2, 3)} & set(truth["frame"].tolist())
     assert [e["kind"] for e in server.fault_log] == ["drop", "disconnect"]
+
+
+def test_spotlab_sim_qualisys_command(tmp_path: Path) -> None:
+    """First stdout line host:port on 127.0.0.1; SIGTERM stops it and writes the truth."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    truth = tmp_path / "t.npz"
+    argv = [
+        "sim",
+        "qualisys",
+        "--markers",
+        "8",
+        "--rate",
+        "50",
+        "--seed",
+        "4",
+        "--truth",
+        str(truth),
+    ]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "spotlab.console.cli", *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONWARNINGS": "ignore"},
+    )
+    try:
+        assert proc.stdout is not None
+        host, port = proc.stdout.readline().strip().split(":")
+        assert host == "127.0.0.1"
+        peer = Peer(int(port))
+        assert peer.text() == (qw.COMMAND, "QTM RT Interface connected")
+        peer.send("StreamFrames AllFrames 3D")
+        got = [_data(peer.packet()[1])[1] for _ in range(10)]
+        peer.close()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    t = np.load(truth)
+    assert set(got) <= set(t["frame"].tolist()) and t["markers_mm"].shape[1:] == (8, 3)
+    assert np.allclose(t["time_s"], (t["frame"] - 1) / 50)
+    assert t["labels"].tolist()[:2] == ["HEAD", "C7"]
