@@ -144,35 +144,45 @@ def parse_data(body: bytes) -> DataFrame:
 
 
 def _counted(comp: bytes, record: int, what: str, signed: bool = False) -> tuple[int, int]:
+    if len(comp) < _COUNTS.size:
+        raise ProtocolError(f"QTM {what} component of {len(comp)} bytes has no header")
     n = struct.unpack_from("<i" if signed else "<I", comp)[0]
     if n < 0 or _COUNTS.size + n * record != len(comp):
         raise ProtocolError(f"QTM {what} component: {n} items do not fill {len(comp)} bytes")
     return n, _COUNTS.size
 
 
+def _f64(a: npt.NDArray[np.float32]) -> F64:
+    """float32 from the wire to float64; a signalling NaN stays NaN, silently."""
+    with np.errstate(invalid="ignore"):
+        return a.astype(np.float64)
+
+
 def markers_3d_from(comp: bytes) -> F64:
     """Labelled markers of a 3D component: (M, 3) mm, NaN where not seen."""
     n, off = _counted(comp, 12, "3D")
-    return np.frombuffer(comp, "<f4", 3 * n, off).reshape(n, 3).astype(np.float64)
+    return _f64(np.frombuffer(comp, "<f4", 3 * n, off).reshape(n, 3))
 
 
 def markers_no_labels_from(comp: bytes) -> tuple[F64, npt.NDArray[np.int64]]:
     """Markers of a 3DNoLabels component: (K, 3) mm and their ids (K,)."""
     n, off = _counted(comp, 16, "3DNoLabels")
     rec = np.frombuffer(comp, [("xyz", "<f4", 3), ("id", "<u4")], n, off)
-    return rec["xyz"].astype(np.float64), rec["id"].astype(np.int64)
+    return _f64(rec["xyz"]), rec["id"].astype(np.int64)
 
 
 def bodies_6d_from(comp: bytes) -> tuple[F64, F64]:
     """Rigid bodies of a 6D component: positions (B, 3) mm, rotations (B, 3, 3) body to
     world (the matrix is sent column by column)."""
     n, off = _counted(comp, 48, "6D", signed=True)
-    v = np.frombuffer(comp, "<f4", 12 * n, off).reshape(n, 12).astype(np.float64)
+    v = _f64(np.frombuffer(comp, "<f4", 12 * n, off).reshape(n, 12))
     return v[:, :3], v[:, 3:].reshape(n, 3, 3).transpose(0, 2, 1)
 
 
 def markers_2d_from(comp: bytes) -> list[tuple[F64, F64]]:
     """Per camera of a 2D component: sub-pixel (K, 2) coordinates and (K, 2) diameters."""
+    if len(comp) < _COUNTS.size:
+        raise ProtocolError(f"QTM 2D component of {len(comp)} bytes has no header")
     (n_cams,) = struct.unpack_from("<I", comp)
     pos, out = _COUNTS.size, []
     for _ in range(n_cams):

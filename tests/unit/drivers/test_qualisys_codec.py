@@ -14,7 +14,9 @@ from spotlab.drivers.qualisys import (
     QualisysDecoder,
     bodies_6d_from,
     command_packet,
+    markers_2d_from,
     markers_3d_from,
+    markers_no_labels_from,
     parse_address,
     parse_data,
     parse_parameters,
@@ -101,3 +103,53 @@ def test_parameters_and_addresses() -> None:
     for bad in ("", ":22", "host:0", "host:x"):
         with pytest.raises(ConfigurationError):
             parse_address(bad)
+
+
+@pytest.mark.parametrize("reader", [markers_3d_from, markers_no_labels_from, bodies_6d_from,
+                                    markers_2d_from])  # fmt: skip
+def test_short_components_are_protocol_errors(reader: object) -> None:
+    for comp in (b"", b"\x01", b"\x05\x00\x00\x00\x00\x00\x00\x00"):
+        with pytest.raises(ProtocolError):
+            reader(comp)  # type: ignore[operator]
+
+
+def test_mutated_streams_never_raise() -> None:
+    """Blind mutations of a QTM byte stream, in random reads: the decoder never raises and
+    the codec functions raise ProtocolError only."""
+    import random
+
+    from spotlab.simulators import qualisys_wire as qw
+    from spotlab.simulators.qualisys_scene import QualisysScene
+    from spotlab.testing.fuzz import mutate
+
+    scene = QualisysScene(markers=40, cameras=2)
+    parts = [qw.text_packet(qw.COMMAND, "QTM RT Interface connected")]
+    for n in range(1, 8):
+        f = scene.frame(n)
+        comps = [
+            qw.component_3d(f.markers),
+            qw.component_6d(f.body_positions, f.body_rotations),
+            qw.component_3d_no_labels(f.markers),
+            qw.component_2d(scene.view_2d(f.markers)),
+        ]
+        parts += [qw.data_packet(scene.timestamp_us(n), n, comps), qw.event_packet(3)]
+    clean = b"".join(parts)
+    rng = random.Random(5)
+    for _ in range(400):
+        data = mutate(rng, clean, clean)
+        dec = QualisysDecoder(40)
+        pos = 0
+        while pos < len(data):
+            step = rng.choice((1, 7, 64, 512, 4096))
+            dec.feed(data[pos : pos + step], pos)
+            pos += step
+        for p in PacketSplitter().feed(data):
+            if p.kind != DATA:
+                continue
+            try:
+                frame = parse_data(p.body)
+                for kind, comp in frame.components.items():
+                    reader = {1: markers_3d_from, 5: bodies_6d_from, 7: markers_2d_from}
+                    reader.get(kind, markers_no_labels_from)(comp)
+            except ProtocolError:
+                pass
