@@ -173,3 +173,26 @@ def test_disconnect_and_reconnect(tmp_path: Path) -> None:
     kept = block.seq - block.seq[0]
     assert np.allclose(trial.points[kept], block.data[:, :, 0, :], atol=1e-3)
     assert np.isnan(trial.points[jumps[0] + 1 : jumps[0] + outage]).all()
+
+
+def test_capture_events_reach_the_decoder() -> None:
+    import socket
+
+    from spotlab.drivers.qualisys import command_packet
+
+    with QualisysServer(QualisysSimOptions(markers=4)) as server:
+        driver = QualisysDriver(server.address)
+        driver.start()
+        with socket.create_connection(("127.0.0.1", server.port), timeout=5) as other:
+            other.sendall(command_packet("TakeControl") + command_packet("Start"))
+            t_end = time.monotonic() + 0.5
+            while time.monotonic() < t_end:
+                driver.recv(0.1)
+            other.sendall(command_packet("Stop"))
+            t_end = time.monotonic() + 0.3
+            while time.monotonic() < t_end:
+                driver.recv(0.1)
+        driver.close()
+    names = [name for _, _, name in driver.decoder.events]
+    assert names == ["capture started", "capture stopped"]
+    assert driver.decoder.summary()["events"] == names
