@@ -53,7 +53,7 @@ def test_vendor_client_streams_what_the_truth_holds(server: QualisysServer) -> N
     assert [e.text for e in root.findall("*/Label/Name")] == truth["labels"].tolist()
     assert [e.text for e in root.findall("*/Body/Name")] == truth["body_names"].tolist()
     assert float(root.findtext("General/Frequency") or 0) == 100.0
-    assert 80 <= len(packets) <= 120
+    assert 60 <= len(packets) <= 140
     frames = [p.framenumber for p in packets]
     assert frames == list(range(frames[0], frames[0] + len(frames)))
     row = {int(n): i for i, n in enumerate(truth["frame"])}
