@@ -6,6 +6,7 @@ little-endian); :mod:`~spotlab.drivers.qualisys.protocol` reads its packets,
 replay), :class:`QualisysDriver` connects, negotiates and streams.
 """
 
+from spotlab.drivers.qualisys.bodies import RigidBodies, bodies_from_recording
 from spotlab.drivers.qualisys.decoder import QualisysDecoder, decoder_from_metadata
 from spotlab.drivers.qualisys.driver import QualisysDriver, parse_address
 from spotlab.drivers.qualisys.protocol import (
@@ -25,7 +26,9 @@ __all__ = [
     "QtmParameters",
     "QualisysDecoder",
     "QualisysDriver",
+    "RigidBodies",
     "bodies_6d_from",
+    "bodies_from_recording",
     "command_packet",
     "decoder_from_metadata",
     "markers_2d_from",

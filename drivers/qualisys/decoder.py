@@ -56,6 +56,8 @@ class QualisysDecoder:
         Labels in QTM's 3D parameters (the 3D component must carry as many).
     stats : LinkStats, optional
         Counters to update (the driver passes its own).
+    keep_bodies : bool
+        Keep every kept frame's 6D bodies in ``bodies`` (for :func:`bodies_from_recording`).
 
     Attributes
     ----------
@@ -67,9 +69,14 @@ class QualisysDecoder:
         Count of packets by type number.
     config_mismatches : int
         Frames whose 3D component holds another number of markers (dropped).
+    bodies : list of (int, ndarray, ndarray)
+        With ``keep_bodies``: ``(seq, positions (B, 3), rotations (B, 3, 3))`` per frame
+        that carried a 6D component.
     """
 
-    def __init__(self, n_markers: int, stats: LinkStats | None = None) -> None:
+    def __init__(
+        self, n_markers: int, stats: LinkStats | None = None, *, keep_bodies: bool = False
+    ) -> None:
         self.n_markers = n_markers
         self.stats = stats if stats is not None else LinkStats()
         self.events: list[tuple[int, int, str]] = []
@@ -77,6 +84,8 @@ class QualisysDecoder:
         self.packets: dict[int, int] = {}
         self.config_mismatches = 0
         self.malformed = 0
+        self.keep_bodies = keep_bodies
+        self.bodies: list[tuple[int, F64, F64]] = []
         self._split = PacketSplitter()
         self._last_frame: int | None = None
         self._last_seq = -1
@@ -102,8 +111,8 @@ class QualisysDecoder:
             try:
                 frame = parse_data(p.body)
                 xyz = markers_3d_from(frame.components[COMP_3D])
-                if COMP_6D in frame.components:
-                    self.last_bodies = bodies_6d_from(frame.components[COMP_6D])
+                six = frame.components.get(COMP_6D)
+                bodies = bodies_6d_from(six) if six is not None else None
             except (ProtocolError, KeyError, ValueError):
                 self.malformed += 1
                 self.stats.crc_errors += 1
@@ -112,6 +121,10 @@ class QualisysDecoder:
                 self.config_mismatches += 1
                 continue
             seqs.append(self._sequence(frame.frame))
+            if bodies is not None:
+                self.last_bodies = bodies
+                if self.keep_bodies:
+                    self.bodies.append((seqs[-1], *bodies))
             ticks.append(frame.timestamp_us)
             rows.append(xyz)
         n = len(seqs)

@@ -18,26 +18,28 @@ from spotlab.acquisition.replay import replay
 from spotlab.console.cli import main
 from spotlab.core.errors import DeviceError
 from spotlab.core.frames import FrameBlock
-from spotlab.drivers.qualisys import QualisysDriver
+from spotlab.drivers.qualisys import QualisysDriver, bodies_from_recording
 from spotlab.io import TRIAL_READERS
 from spotlab.processing.decoding import decoder_for
 from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
 
 
 def _vendor_client(
-    port: int, stop: threading.Event, out: dict[int, np.ndarray]
+    port: int, stop: threading.Event, out: dict[int, tuple[np.ndarray, np.ndarray]]
 ) -> threading.Thread:
-    """Qualisys' qtm-rt client streaming 3D in a thread of its own until ``stop`` is set:
-    frame -> (M, 3)."""
+    """Qualisys' qtm-rt client streaming 3D and 6D in a thread of its own until ``stop`` is
+    set: frame -> (markers (M, 3), bodies (B, 12) as sent)."""
     qtm_rt = pytest.importorskip("qtm_rt")
 
     def on_packet(p: Any) -> None:
         _, markers = p.get_3d_markers()
-        out[p.framenumber] = np.array([[m.x, m.y, m.z] for m in markers])
+        _, bodies = p.get_6d()
+        six = np.array([[b[0].x, b[0].y, b[0].z, *b[1].matrix] for b in bodies])
+        out[p.framenumber] = (np.array([[m.x, m.y, m.z] for m in markers]), six)
 
     async def session() -> None:
         conn = await qtm_rt.connect("127.0.0.1", port=port)
-        await conn.stream_frames(components=["3d"], on_packet=on_packet)
+        await conn.stream_frames(components=["3d", "6d"], on_packet=on_packet)
         while not stop.is_set():
             await asyncio.sleep(0.05)
         await conn.stream_frames_stop()
@@ -56,7 +58,7 @@ def _replayed(path: Path) -> FrameBlock:
 def test_record_5_s_equals_truth_and_vendor_client(tmp_path: Path, capsys: Any) -> None:
     out = tmp_path / "q.spj"
     options = QualisysSimOptions(markers=40, cameras=4, rate_hz=100.0, seed=2)
-    vendor: dict[int, np.ndarray] = {}
+    vendor: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     stop = threading.Event()
     with QualisysServer(options) as server:
         client = _vendor_client(server.port, stop, vendor)
@@ -78,8 +80,18 @@ def test_record_5_s_equals_truth_and_vendor_client(tmp_path: Path, capsys: Any) 
     assert np.array_equal(block.data[:, :, 0, :], true32)
     both = [i for i, s in enumerate(block.seq) if int(s) in vendor]
     assert len(both) == len(block)  # the client saw every frame recorded
-    theirs = np.array([vendor[int(block.seq[i])] for i in both])
+    theirs = np.array([vendor[int(block.seq[i])][0] for i in both])
     assert np.array_equal(block.data[both, :, 0, :], theirs)
+    bodies = bodies_from_recording(out)
+    assert bodies.names == ("pelvis", "head", "thorax")
+    assert np.array_equal(bodies.seq, block.seq)
+    assert np.array_equal(bodies.positions, truth["body_positions_mm"][rows].astype(np.float32))
+    assert np.abs(bodies.rotations - truth["body_rotations"][rows]).max() < 1e-6
+    their6 = np.array([vendor[int(s)][1] for s in bodies.seq])
+    assert np.array_equal(their6[:, :, :3], bodies.positions)
+    assert np.array_equal(
+        their6[:, :, 3:], bodies.rotations.transpose(0, 1, 3, 2).reshape(-1, 3, 9)
+    )
     code = main(["info", str(out), "--json"])
     assert code == 0
     info = capsys.readouterr().out.strip().splitlines()[-1]
