@@ -67,6 +67,7 @@ FAMILY_SETTINGS: dict[str, dict[str, tuple[str, Converter, str]]] = {
         "blobs": ("max_blobs", _int, "blobs per camera and frame at most"),
         "baud": ("baud", _baud, "line rate while streaming, or 'auto'"),
     },
+    "qualisys": {"password": ("password", str, "QTM's real-time password (TakeControl)")},
 }
 
 #: ``spotlab record`` option -> setting key, the defaults for devices that do not say.

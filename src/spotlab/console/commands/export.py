@@ -41,6 +41,7 @@ from spotlab.processing import (
     write_timestamps,
     write_trial,
 )
+from spotlab.processing.labelled_points import labelled_trial
 
 
 def add_parser(sub: Any) -> None:
@@ -183,6 +184,8 @@ def run(args: argparse.Namespace) -> int:
             "markers": trial.n_markers,
             "rate_hz": trial.point_rate,
         }
+    elif suffix == ".spj" and args.calibration is None and (found := labelled_trial(path)):
+        trial, summary = found  # labelled 3-D markers (a QTM server's): written as they are
     elif suffix in OBSERVATION_SUFFIXES:
         if args.calibration is None and suffix != ".spj":
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")

@@ -1,0 +1,432 @@
+"""A simulated Qualisys QTM real-time server on 127.0.0.1 (docs/protocols/qualisys.md).
+
+:class:`QualisysServer` runs an asyncio TCP server in a thread of its own. Its
+cameras capture from start-up (QTM's real-time preview) at ``rate_hz``; frame
+*n* (from 1) is taken at ``(n - 1) / rate_hz`` s after start-up and carries
+that time in µs as QTM's timestamp. Each client that asked with
+``StreamFrames`` gets the frames of its choice with the components of its
+choice; ``GetCurrentFrame``, ``GetParameters``, ``GetState``, ``Version``,
+``QTMVersion``, ``ByteOrder``, ``TakeControl``/``ReleaseControl`` (with an
+optional password) and ``Start``/``Stop`` are answered as the spec says.
+
+Faults (``drop@T[:N]``, ``disconnect@T[:OUTAGE_S]``) are timed from the first
+``StreamFrames`` any client sends. The truth (``truth()``, or the ``.npz``
+written by :meth:`QualisysServer.stop`) holds every frame sent to at least
+one client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spotlab.simulators import qualisys_wire as qw
+from spotlab.simulators.faults import parse_schedule
+from spotlab.simulators.qualisys_scene import QualisysScene, SceneFrame
+
+#: Protocol versions the simulator speaks (the layouts of qualisys.md are 1.25's).
+VERSIONS = ("1.25",)
+QTM_VERSION = "QTM Version is 2024.2 (build 0000, spotlab simulator)"
+WELCOME = "QTM RT Interface connected"
+#: Seconds between the reply to ``Start``/``Stop`` and the capture event (QTM's cameras
+#: take time to start; a client that waits for the event after the reply sees it).
+EVENT_DELAY_S = 0.05
+#: Fault kinds the QTM simulator injects.
+FAULT_KINDS = ("drop", "disconnect")
+
+
+@dataclass
+class QualisysSimOptions:
+    """What ``spotlab sim qualisys`` serves (see the module docstring)."""
+
+    cameras: int = 8
+    markers: int = 40
+    rate_hz: float = 100.0
+    seed: int = 0
+    port: int = 0
+    truth: Path | None = None
+    faults: str = ""
+    password: str | None = None
+    versions: tuple[str, ...] = VERSIONS
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first option out of range."""
+        QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed)
+        if not 0 <= self.port <= 65535:
+            raise ValueError(f"--port must be 0 to 65535, got {self.port}")
+        for spec in parse_schedule(self.faults):
+            if spec.kind not in FAULT_KINDS:
+                raise ValueError(
+                    f"--faults: the qualisys simulator injects {', '.join(FAULT_KINDS)}, "
+                    f"not {spec.kind!r}"
+                )
+
+
+@dataclass(eq=False)
+class _Client:
+    writer: asyncio.StreamWriter
+    components: tuple[str, ...] = ()
+    divisor: int = 0  # 0: not streaming
+    version: str = VERSIONS[-1]
+
+
+@dataclass
+class _Truth:
+    frames: list[int] = field(default_factory=list)
+    markers: list[np.ndarray] = field(default_factory=list)
+    positions: list[np.ndarray] = field(default_factory=list)
+    rotations: list[np.ndarray] = field(default_factory=list)
+
+
+class QualisysServer:
+    """The simulated QTM: ``start()``, then clients connect to :attr:`address`; ``stop()``.
+
+    Parameters
+    ----------
+    options : QualisysSimOptions
+        Scene, rate, port, password, faults and truth file.
+    """
+
+    def __init__(self, options: QualisysSimOptions) -> None:
+        options.validate()
+        self.options = options
+        self.scene = QualisysScene(options.markers, options.cameras, options.rate_hz, options.seed)
+        self.faults = parse_schedule(options.faults)
+        self.fault_log: list[dict[str, Any]] = []
+        self.state = qw.EV_CONNECTED
+        self.port = 0
+        self.connections = 0
+        self._truth = _Truth()
+        self._clients: set[_Client] = set()
+        self._master: _Client | None = None
+        self._anchor: float | None = None
+        self._refuse_until = 0.0
+        self._dropped: set[int] = set()
+        self._frame = 0
+        self._t0 = 0.0
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stopping: asyncio.Event | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+
+    # -- life cycle --------------------------------------------------------------
+    @property
+    def address(self) -> str:
+        """``127.0.0.1:PORT``, what a client connects to."""
+        return f"127.0.0.1:{self.port}"
+
+    def start(self) -> QualisysServer:
+        """Bind and serve in a thread; returns once clients can connect.
+
+        Raises
+        ------
+        OSError
+            If the port cannot be bound.
+        """
+        self._thread = threading.Thread(target=self._run, name="qtm-sim", daemon=True)
+        self._thread.start()
+        self._ready.wait(10.0)
+        if self._error is not None:
+            raise self._error
+        return self
+
+    def stop(self) -> None:
+        """Close every connection, stop serving, write the truth file if one was asked."""
+        if self._thread is None:
+            return
+        if self._loop is not None and self._stopping is not None:
+            self._loop.call_soon_threadsafe(self._stopping.set)
+        self._thread.join(10.0)
+        self._thread = None
+        if self.options.truth is not None:
+            self.write_truth(self.options.truth)
+
+    def __enter__(self) -> QualisysServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def truth(self) -> dict[str, Any]:
+        """Every frame sent to a client: ``frame`` (F,), ``time_s`` (F,), ``timestamp_us``
+        (F,), ``markers_mm`` (F, M, 3), ``labels`` (M,), ``body_names`` (B,),
+        ``body_positions_mm`` (F, B, 3), ``body_rotations`` (F, B, 3, 3) (body to world)."""
+        t = self._truth
+        frames = np.asarray(t.frames, dtype=np.int64)
+        f, m, b = len(frames), self.scene.n_markers, len(self.scene.body_names)
+        return {
+            "frame": frames,
+            "time_s": (frames - 1) / self.scene.rate_hz,
+            "timestamp_us": np.array([self.scene.timestamp_us(int(n)) for n in frames], np.int64),
+            "markers_mm": np.array(t.markers).reshape(f, m, 3),
+            "labels": np.array(self.scene.labels),
+            "body_names": np.array(self.scene.body_names),
+            "body_positions_mm": np.array(t.positions).reshape(f, b, 3),
+            "body_rotations": np.array(t.rotations).reshape(f, b, 3, 3),
+        }
+
+    def write_truth(self, path: Path) -> None:
+        """Write :meth:`truth` as a ``.npz`` file."""
+        with open(path, "wb") as f:
+            np.savez(f, **self.truth())
+
+    # -- the event loop ----------------------------------------------------------
+    def _run(self) -> None:
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        try:
+            loop.run_until_complete(self._main())
+        except BaseException as exc:  # reported to start() when it fails to bind
+            self._error = exc
+            self._ready.set()
+        finally:
+            loop.close()
+
+    async def _main(self) -> None:
+        self._stopping = asyncio.Event()
+        server = await asyncio.start_server(self._serve_client, "127.0.0.1", self.options.port)
+        self.port = int(server.sockets[0].getsockname()[1])
+        self._t0 = time.monotonic()
+        ticker = asyncio.ensure_future(self._ticker())
+        self._ready.set()
+        try:
+            await self._stopping.wait()
+        finally:
+            ticker.cancel()
+            server.close()
+            for client in list(self._clients):
+                client.writer.close()
+            await server.wait_closed()
+
+    async def _ticker(self) -> None:
+        n = 1
+        period = 1.0 / self.scene.rate_hz
+        while True:
+            delay = self._t0 + (n - 1) * period - time.monotonic()
+            await asyncio.sleep(max(delay, 0.0))
+            self._timed_faults()
+            self._emit(n)
+            self._frame = n
+            n += 1
+
+    # -- frames ----------------------------------------------------------------------
+    def _emit(self, n: int) -> None:
+        takers = [c for c in self._clients if c.divisor and (n - 1) % c.divisor == 0]
+        if not takers:
+            return
+        if n in self._dropped:
+            return
+        frame = self.scene.frame(n)
+        for client in takers:
+            client.writer.write(self._data(n, frame, client.components))
+        t = self._truth
+        t.frames.append(n)
+        t.markers.append(frame.markers)
+        t.positions.append(frame.body_positions)
+        t.rotations.append(frame.body_rotations)
+
+    def _data(self, n: int, frame: SceneFrame, components: tuple[str, ...]) -> bytes:
+        parts = []
+        for name in components:
+            if name == "3d":
+                parts.append(qw.component_3d(frame.markers))
+            elif name == "3dnolabels":
+                parts.append(qw.component_3d_no_labels(frame.markers))
+            elif name == "6d":
+                parts.append(qw.component_6d(frame.body_positions, frame.body_rotations))
+            elif name == "2d":
+                parts.append(qw.component_2d(self.scene.view_2d(frame.markers)))
+        return qw.data_packet(self.scene.timestamp_us(n), n, parts)
+
+    # -- faults ------------------------------------------------------------------------
+    def _anchor_faults(self) -> None:
+        if self._anchor is not None:
+            return
+        self._anchor = time.monotonic()
+        first = self._frame + 1
+        for spec in self.faults:
+            if spec.kind == "drop":
+                at = first + round(spec.at_s * self.scene.rate_hz)
+                count = round(spec.arg or 1)
+                self._dropped.update(range(at, at + count))
+                self.fault_log.append({"kind": "drop", "at_s": spec.at_s, "frames": [at, count]})
+
+    def _timed_faults(self) -> None:
+        if self._anchor is None:
+            return
+        since = time.monotonic() - self._anchor
+        for spec in self.faults:
+            if spec.kind != "disconnect" or spec.at_s > since:
+                continue
+            if any(e["kind"] == "disconnect" and e["at_s"] == spec.at_s for e in self.fault_log):
+                continue
+            outage = spec.arg or 1.0
+            self._refuse_until = time.monotonic() + outage
+            self.fault_log.append(
+                {"kind": "disconnect", "at_s": spec.at_s, "outage_s": outage, "frame": self._frame}
+            )
+            for client in list(self._clients):
+                client.writer.write(qw.event_packet(qw.EV_CONNECTION_CLOSED))
+                client.writer.close()
+                self._drop_client(client)
+
+    # -- clients ------------------------------------------------------------------------
+    def _drop_client(self, client: _Client) -> None:
+        self._clients.discard(client)
+        if self._master is client:
+            self._master = None
+
+    async def _serve_client(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter
+    ) -> None:
+        if time.monotonic() < self._refuse_until:
+            writer.close()
+            return
+        self.connections += 1
+        client = _Client(writer)
+        self._clients.add(client)
+        writer.write(qw.text_packet(qw.COMMAND, WELCOME))
+        commands = qw.CommandReader()
+        try:
+            while client in self._clients:
+                data = await reader.read(65536)
+                if not data:
+                    break
+                for packet in commands.feed(data):
+                    self._handle(client, packet)
+                await writer.drain()
+        except (ConnectionError, ValueError):
+            pass
+        finally:
+            self._drop_client(client)
+            writer.close()
+
+    def _reply(self, client: _Client, text: str, kind: int = qw.COMMAND) -> None:
+        client.writer.write(qw.text_packet(kind, text))
+
+    def _error_reply(self, client: _Client, text: str) -> None:
+        self._reply(client, text, qw.ERROR)
+
+    def _broadcast_event(self, event: int, delay_s: float = 0.0) -> None:
+        if delay_s > 0 and self._loop is not None:
+            self._loop.call_later(delay_s, self._broadcast_event, event)
+            return
+        self.state = event
+        for c in self._clients:
+            c.writer.write(qw.event_packet(event))
+
+    def _handle(self, client: _Client, packet: qw.ClientPacket) -> None:
+        if packet.kind == qw.XML:
+            self._error_reply(client, "Setting parameters is not supported by the simulator")
+            return
+        words = packet.text.split()
+        if packet.kind != qw.COMMAND or not words:
+            self._error_reply(client, "Parse error")
+            return
+        verb, args = words[0].lower(), words[1:]
+        if verb == "version":
+            if not args:
+                self._reply(client, f"Version is {client.version}")
+            elif args[0] in self.options.versions:
+                client.version = args[0]
+                self._reply(client, f"Version set to {args[0]}")
+            else:
+                self._error_reply(client, "Version NOT supported")
+        elif verb == "qtmversion":
+            self._reply(client, QTM_VERSION)
+        elif verb == "byteorder":
+            self._reply(client, "Byte order is little endian")
+        elif verb == "getstate":
+            client.writer.write(qw.event_packet(self.state))
+        elif verb == "getparameters":
+            self._parameters(client, [a.lower() for a in args])
+        elif verb == "getcurrentframe":
+            comps = self._components(client, args)
+            if comps is not None:
+                n = max(self._frame, 1)
+                client.writer.write(self._data(n, self.scene.frame(n), comps))
+        elif verb == "streamframes":
+            self._stream(client, args)
+        elif verb == "takecontrol":
+            self._take_control(client, args)
+        elif verb == "releasecontrol":
+            if self._master is client:
+                self._master = None
+            self._reply(client, "You are now a regular client")
+        elif verb in ("start", "stop"):
+            if self._master is not client:
+                self._error_reply(client, "You must be master to issue this command")
+            elif verb == "start":
+                self._reply(client, "Starting measurement")
+                self._broadcast_event(qw.EV_CAPTURE_STARTED, EVENT_DELAY_S)
+            else:
+                self._reply(client, "Stopping measurement")
+                self._broadcast_event(qw.EV_CAPTURE_STOPPED, EVENT_DELAY_S)
+        else:
+            self._error_reply(client, "Parse error")
+
+    def _parameters(self, client: _Client, args: list[str]) -> None:
+        sections = set()
+        for a in args:
+            sections |= {"general", "3d", "6d"} if a == "all" else {a}
+        known = sections & {"general", "3d", "6d"}
+        if not args:
+            self._error_reply(client, "Parse error")
+            return
+        self._reply(client, self.scene.parameters_xml(known), qw.XML)
+
+    def _components(self, client: _Client, names: list[str]) -> tuple[str, ...] | None:
+        comps = tuple(n.lower() for n in names)
+        unknown = [n for n in comps if n not in qw.COMPONENTS]
+        if not comps or unknown:
+            self._error_reply(
+                client, f"Component {unknown[0] if unknown else '(none)'} is not supported"
+            )
+            return None
+        return comps
+
+    def _stream(self, client: _Client, args: list[str]) -> None:
+        if args and args[0].lower() == "stop":
+            client.divisor = 0
+            return
+        if not args:
+            self._error_reply(client, "Parse error")
+            return
+        how, _, value = args[0].lower().partition(":")
+        rate = self.scene.rate_hz
+        try:
+            if how == "allframes":
+                divisor = 1
+            elif how == "frequency":
+                divisor = max(1, round(rate / float(value)))
+            elif how == "frequencydivisor":
+                divisor = int(value)
+            else:
+                raise ValueError(how)
+            if divisor < 1:
+                raise ValueError(value)
+        except (ValueError, ZeroDivisionError):
+            self._error_reply(client, f"Parse error: {args[0]}")
+            return
+        comps = self._components(client, args[1:])
+        if comps is None:
+            return
+        client.components, client.divisor = comps, divisor
+        self._anchor_faults()
+
+    def _take_control(self, client: _Client, args: list[str]) -> None:
+        password = self.options.password
+        if self._master is not None and self._master is not client:
+            self._error_reply(client, "The client is already master")
+        elif password is not None and (not args or args[0] != password):
+            self._error_reply(client, "Wrong or missing password")
+        else:
+            self._master = client
+            self._reply(client, "You are now master")
