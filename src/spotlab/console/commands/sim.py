@@ -9,6 +9,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from spotlab.console.commands import sim_natnet
 from spotlab.console.errors import CommandError
 from spotlab.io import FileFormatError
 from spotlab.processing.paths import check_output_dir, check_output_paths
@@ -37,7 +38,9 @@ def add_parser(sub: Any) -> None:
         "the device path to open; with --tcp it is a socket:// URL. It serves until stopped "
         "(Ctrl-C, SIGTERM) or until --seconds have passed.",
     )
-    p.add_argument("family", choices=["selspot", "timer", "centroid"], help="device family")
+    p.add_argument(
+        "family", choices=["selspot", "timer", "centroid", "natnet"], help="device family"
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--pty", action="store_true", help="serve on a real pseudo-terminal (default)"
@@ -190,6 +193,7 @@ def add_parser(sub: Any) -> None:
         help="write the markers' model (truth labels, rigid clusters, distance links) as JSON "
         "for spotlab record --model / spotlab reconstruct --model",
     )  # fmt: skip
+    sim_natnet.add_arguments(p)
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     p.set_defaults(run=run)
 
@@ -363,6 +367,8 @@ def check_args(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.family == "natnet":
+        return sim_natnet.run(args)
     check_args(args)
     if args.family == "centroid":
         if args.tcp is not None:
