@@ -20,6 +20,7 @@ DRIVERS: dict[str, tuple[str, str]] = {
     "centroid": ("spotlab.drivers.centroid", "CentroidDriver"),
     "lsl": ("spotlab.drivers.lsl", "LslInletDriver"),
     "oak": ("spotlab.drivers.oak", "OakDriver"),
+    "natnet": ("spotlab.drivers.natnet", "NatNetDriver"),
 }
 
 
