@@ -52,6 +52,7 @@ DEFAULT_PORT = 1510
 #: Frames read at start to measure the frame rate.
 RATE_FRAMES = 5
 KEEPALIVE_S = 1.0
+_FRAME_ID = NAT_FRAMEOFDATA.to_bytes(2, "little")
 
 
 def parse_address(port: str) -> tuple[str, int]:
@@ -168,7 +169,9 @@ class NatNetDriver(Driver):
         self._tap_tx(data, time.monotonic_ns())
 
     def _receive(self, timeout: float) -> list[tuple[bytes, int]]:
-        """Datagrams that arrive within ``timeout`` s (all that wait, once one has come)."""
+        """Datagrams that arrive within ``timeout`` s (all that wait, once one has come),
+        with their arrival stamps; the caller taps them (frames at start-up only once
+        the stream is described, so that the journal decodes them)."""
         assert self._sock is not None
         ready, _, _ = select.select([self._sock], [], [], max(0.0, timeout))
         out: list[tuple[bytes, int]] = []
@@ -184,7 +187,6 @@ class NatNetDriver(Driver):
                     f"{self.name}: no NatNet server at {self.port}: {exc}"
                 ) from exc
             t_ns = time.monotonic_ns()
-            self._tap_rx(data, t_ns)
             self.stats.bytes += len(data)
             out.append((data, t_ns))
         if out:
@@ -199,14 +201,16 @@ class NatNetDriver(Driver):
             deadline = time.monotonic() + self.reply_timeout
             while time.monotonic() < deadline:
                 for data, t_ns in self._receive(deadline - time.monotonic()):
+                    if data[:2] == _FRAME_ID:
+                        self._pending.append((data, t_ns))
+                        continue
+                    self._tap_rx(data, t_ns)
                     try:
                         message_id, payload = split_packet(data)
                     except NatNetFormatError as exc:
                         raise ProtocolError(f"{self.name}: not a NatNet server: {exc}") from exc
                     if message_id == answer:
                         return payload
-                    if message_id == NAT_FRAMEOFDATA:
-                        self._pending.append((data, t_ns))
         raise DeviceNotFound(
             f"{self.name}: no {what} from a NatNet server at {self.port} "
             f"within 3 x {self.reply_timeout:g} s"
@@ -274,8 +278,10 @@ class NatNetDriver(Driver):
         deadline = time.monotonic() + max(2.0, self.reply_timeout)
         while len(self._pending) < RATE_FRAMES and time.monotonic() < deadline:
             for data, t_ns in self._receive(deadline - time.monotonic()):
-                if data[:2] == NAT_FRAMEOFDATA.to_bytes(2, "little"):
+                if data[:2] == _FRAME_ID:
                     self._pending.append((data, t_ns))
+                else:
+                    self._tap_rx(data, t_ns)
         stamps = []
         for data, _ in self._pending:
             try:
@@ -319,6 +325,8 @@ class NatNetDriver(Driver):
                 self._tap_event("disconnected", reason=reason)
                 raise DeviceDisconnected(f"{self.name}: {reason}")
             return None
+        for data, t_ns in got:
+            self._tap_rx(data, t_ns)
         blocks = [self._decoder.feed(data, t_ns) for data, t_ns in got]
         blocks = [b for b in blocks if len(b)]
         if not blocks:

@@ -7,6 +7,7 @@ its markers equal the simulator's truth and what a third-party client (PyPI
 
 from __future__ import annotations
 
+import json
 import socket
 import struct
 import threading
@@ -20,6 +21,7 @@ import pytest
 from spotlab.acquisition.replay import replay
 from spotlab.console.cli import main
 from spotlab.drivers.natnet import NatNetDriver
+from spotlab.io import TRIAL_READERS
 from spotlab.processing.decoding import decoder_for
 from spotlab.simulators.natnet import NatNetServer
 from spotlab.simulators.natnet_scene import NatNetScene
@@ -65,8 +67,13 @@ def test_record_5_s_keeps_every_frame_and_matches_truth_and_vendor_client(
     assert code == 0, capsys.readouterr().err
     assert "natnet:" in capsys.readouterr().out
 
+    assert main(["info", str(out), "--json"]) == 0
+    (stream,) = json.loads(capsys.readouterr().out)["streams"]
+    assert stream["frames"] == stream["live_stats"]["frames"], "the journal lost start-up frames"
+    assert stream["lost_frames"] == stream["crc_errors"] == stream["duplicates"] == 0
+
     seq, data = _recorded(out)
-    assert len(seq) >= 450
+    assert len(seq) == stream["frames"] >= 450
     assert list(seq) == list(range(seq[0], seq[0] + len(seq))), "a frame was lost"
     t = np.load(truth)
     row = {int(k): i for i, k in enumerate(t["frame"])}
@@ -149,3 +156,24 @@ def test_record_names_a_silent_address(tmp_path: Path, capsys: pytest.CaptureFix
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and len(err) == 1 and err[0].startswith("spotlab: error:")
     assert "no server info" in err[0] and time.monotonic() - t0 < 10
+
+
+def test_export_c3d_of_a_natnet_recording_gives_the_labelled_markers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = NatNetScene(markers=10, cameras=4, rate_hz=100.0, seed=1)
+    out, c3d = tmp_path / "rec.spj", tmp_path / "rec.c3d"
+    with NatNetServer(scene, faults="drop@0.5:3") as srv:
+        code = main(["record", "--device", f"natnet={srv.address}", "--seconds", "1.5",
+                     "--out", str(out)])  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    seq, data = _recorded(out)
+    assert main(["export", str(out), "--c3d", str(c3d)]) == 0
+    assert "converted" in capsys.readouterr().out
+    trial = TRIAL_READERS[".c3d"](c3d)
+    assert trial.labels == list(scene.labels) and trial.point_rate == 100.0
+    assert trial.n_frames == seq[-1] - seq[0] + 1 == len(seq) + 3  # the dropped frames: NaN
+    rows = seq - seq[0]
+    np.testing.assert_allclose(trial.points[rows], data[:, :, 0, :], atol=1e-3)
+    missing = np.setdiff1d(np.arange(trial.n_frames), rows)
+    assert len(missing) == 3 and np.isnan(trial.points[missing]).all()

@@ -27,6 +27,7 @@ from spotlab.console.errors import CommandError
 from spotlab.console.options import parse_wiring
 from spotlab.console.progress import Progress
 from spotlab.console.summaries import print_summary
+from spotlab.core.streams import StreamSpec
 from spotlab.io import TRIAL_READERS, Trial
 from spotlab.kinematics import smooth_trial
 from spotlab.processing import (
@@ -41,6 +42,7 @@ from spotlab.processing import (
     write_timestamps,
     write_trial,
 )
+from spotlab.processing.recorded_markers import marker_stream, recorded_trial
 
 
 def add_parser(sub: Any) -> None:
@@ -183,6 +185,10 @@ def run(args: argparse.Namespace) -> int:
             "markers": trial.n_markers,
             "rate_hz": trial.point_rate,
         }
+    elif (markers := _marker_stream(suffix, path, args)) is not None:
+        trial = recorded_trial(path, markers)
+        summary = {"input": str(path), "frames": trial.n_frames, "markers": trial.n_markers,
+                   "rate_hz": trial.point_rate}  # fmt: skip
     elif suffix in OBSERVATION_SUFFIXES:
         if args.calibration is None and suffix != ".spj":
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")
@@ -220,6 +226,11 @@ def run(args: argparse.Namespace) -> int:
         for out in outputs:
             print(f"  wrote              {out}")
     return 0
+
+
+def _marker_stream(suffix: str, path: Path, args: argparse.Namespace) -> StreamSpec | None:
+    """A recording's labelled 3-D markers (NatNet), exported as they are, without --calibration."""
+    return marker_stream(path) if suffix == ".spj" and args.calibration is None else None
 
 
 def _print_sync(sync: dict[str, Any]) -> None:
