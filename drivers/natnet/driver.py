@@ -90,7 +90,12 @@ class NatNetDriver(Driver):
     reply_timeout : float
         Seconds to wait for each reply (server info, model descriptions); 3 tries.
     silence_timeout : float
-        Seconds without a datagram after which the server counts as gone.
+        Seconds without a datagram after which the server counts as gone (a
+        ``disconnected`` event); the driver then sends ``NAT_CONNECT`` every second
+        and goes on (``reconnected``) when the server answers or streams again.
+    reconnect_timeout : float, optional
+        Seconds of absence after which ``recv`` raises ``DeviceDisconnected``
+        (default: never; the session's end or a stop ends the wait).
     """
 
     family = "natnet"
@@ -103,6 +108,7 @@ class NatNetDriver(Driver):
         marker_set: str | None = None,
         reply_timeout: float = 1.0,
         silence_timeout: float = 2.0,
+        reconnect_timeout: float | None = None,
     ) -> None:
         super().__init__(port, name=name)
         self.address = parse_address(self.port)
@@ -111,6 +117,8 @@ class NatNetDriver(Driver):
         self.want_set = marker_set
         self.reply_timeout = reply_timeout
         self.silence_timeout = silence_timeout
+        self.reconnect_timeout = reconnect_timeout
+        self._away_since: float | None = None
         self.server: ServerInfo | None = None
         self.models: ModelDefinitions | None = None
         self.marker_set = ""
@@ -218,6 +226,7 @@ class NatNetDriver(Driver):
 
     # -- life cycle ----------------------------------------------------------------
     def _start(self) -> None:
+        self._away_since = None
         if self._sock is None:
             family = socket.AF_INET6 if ":" in self.address[0] else socket.AF_INET
             self._sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -225,7 +234,10 @@ class NatNetDriver(Driver):
             self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
             self._tap_event("open", port=self.port)
         self._pending.clear()
-        info = parse_server_info(self._ask(connect_request(), NAT_SERVERINFO, "server info"))
+        try:
+            info = parse_server_info(self._ask(connect_request(), NAT_SERVERINFO, "server info"))
+        except NatNetFormatError as exc:
+            raise ProtocolError(f"{self.name}: bad NatNet server info: {exc}") from exc
         major, minor = info.version
         if major not in MAJORS:
             raise ProtocolError(
@@ -313,18 +325,21 @@ class NatNetDriver(Driver):
             raise DeviceError(f"{self.name} ({self.port}) is not streaming: call start() first")
         now = time.monotonic()
         if now - self._last_keepalive >= KEEPALIVE_S:
-            self._send(request(NAT_KEEPALIVE))
+            # While the server is away, ask it in again; else keep the subscription.
+            away = self._away_since is not None
+            self._send(connect_request() if away else request(NAT_KEEPALIVE))
             self._last_keepalive = now
         got, self._pending = self._pending, []
         if not got:
             wait = KEEPALIVE_S if timeout is None else min(timeout, KEEPALIVE_S)
             got = self._receive(wait)
         if not got:
-            if time.monotonic() - self._last_rx > self.silence_timeout:
-                reason = f"no NatNet datagram from {self.port} for {self.silence_timeout:g} s"
-                self._tap_event("disconnected", reason=reason)
-                raise DeviceDisconnected(f"{self.name}: {reason}")
+            self._check_silence()
             return None
+        if self._away_since is not None:
+            self._away_since = None
+            self.stats.reconnects += 1
+            self._tap_event("reconnected", port=self.port)
         for data, t_ns in got:
             self._tap_rx(data, t_ns)
         blocks = [self._decoder.feed(data, t_ns) for data, t_ns in got]
@@ -332,3 +347,22 @@ class NatNetDriver(Driver):
         if not blocks:
             return None
         return blocks[0] if len(blocks) == 1 else FrameBlock.concat(blocks)
+
+    def _check_silence(self) -> None:
+        """After ``silence_timeout`` s without a datagram the server is away: say so once,
+        then ask it in again every second; give up after ``reconnect_timeout`` s."""
+        assert self._decoder is not None
+        now = time.monotonic()
+        if self._away_since is None:
+            if now - self._last_rx <= self.silence_timeout:
+                return
+            self._away_since = now
+            self.stats.gaps += 1
+            self._decoder.mark_discontinuity()
+            reason = f"no NatNet datagram from {self.port} for {self.silence_timeout:g} s"
+            self._tap_event("disconnected", reason=reason)
+        elif self.reconnect_timeout is not None and now - self._away_since > self.reconnect_timeout:
+            raise DeviceDisconnected(
+                f"{self.name}: the NatNet server at {self.port} has sent nothing for "
+                f"{now - self._last_rx:.1f} s"
+            )

@@ -114,6 +114,9 @@ def _fake_server(version: bytes, stop: threading.Event) -> tuple[socket.socket, 
                 _, addr = sock.recvfrom(4096)
             except TimeoutError:
                 continue
+            if version.startswith(b"RAW:"):
+                sock.sendto(version[4:], addr)
+                continue
             body = b"old-motive".ljust(256, b"\0") + bytes((2, 0, 0, 0)) + version
             sock.sendto(struct.pack("<HH", 1, len(body)) + body, addr)
 
@@ -124,9 +127,14 @@ def _fake_server(version: bytes, stop: threading.Event) -> tuple[socket.socket, 
 
 @pytest.mark.parametrize(
     ("reply", "message"),
-    [(bytes((2, 9, 0, 0)), "speaks NatNet 2.9"), (bytes((5, 0, 0, 0)), "speaks NatNet 5.0")],
+    [
+        (bytes((2, 9, 0, 0)), "speaks NatNet 2.9"),
+        (bytes((5, 0, 0, 0)), "speaks NatNet 5.0"),
+        (b"RAW:HTTP/1.1 400 Bad Request\r\n", "not a NatNet server"),
+        (b"RAW:\x01\x00\x05\x00short", "bad NatNet server info: server info holds 264"),
+    ],
 )
-def test_record_refuses_a_server_of_another_natnet_version(
+def test_record_refuses_another_natnet_version_or_a_malformed_reply(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], reply: bytes, message: str
 ) -> None:
     stop = threading.Event()
@@ -177,3 +185,26 @@ def test_export_c3d_of_a_natnet_recording_gives_the_labelled_markers(
     np.testing.assert_allclose(trial.points[rows], data[:, :, 0, :], atol=1e-3)
     missing = np.setdiff1d(np.arange(trial.n_frames), rows)
     assert len(missing) == 3 and np.isnan(trial.points[missing]).all()
+
+
+def test_a_server_that_falls_silent_and_returns_is_recorded_across_the_outage(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = NatNetScene(markers=6, cameras=2, rate_hz=100.0, seed=0)
+    out, truth = tmp_path / "rec.spj", tmp_path / "truth.npz"
+    with NatNetServer(scene, truth=truth, faults="disconnect@0.5:3") as srv:
+        code = main(["record", "--device", f"natnet={srv.address}", "--seconds", "5",
+                     "--out", str(out), "--json"])  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    result = json.loads(capsys.readouterr().out)
+    (stream,) = result["streams"]
+    assert stream["reconnects"] == 1 and stream["gaps"] == 1 and stream["lost_frames"] == 0
+    assert result["away_at_end"] == {}
+    seq, data = _recorded(out)
+    t = np.load(truth)
+    served = t["frame"][(t["frame"] >= seq[0]) & (t["frame"] <= seq[-1])]
+    assert list(seq) == list(served), "a frame the server sent is missing"
+    assert np.diff(seq).max() >= 250  # the outage: 3 s without frames
+    row = {int(k): i for i, k in enumerate(t["frame"])}
+    want = _as_served(t["markers_mm"][[row[int(k)] for k in seq]])
+    np.testing.assert_array_equal(data[:, :, 0, :], want)
