@@ -129,6 +129,14 @@ class NatNetDecoder:
             status=np.asarray([f.params for f in rows], dtype=np.uint16),
         )
 
+    def summary(self) -> dict[str, Any]:
+        """Figures for ``spotlab info``: the marker set, its labels, the NatNet version."""
+        return {
+            "natnet_version": f"{self.version[0]}.{self.version[1]}",
+            "marker_set": self.marker_set,
+            "labels": list(self.labels),
+        }
+
     def mark_discontinuity(self) -> None:
         """Drop a partial packet; frame numbers are not joined across the break."""
         self._buf.clear()

@@ -176,6 +176,9 @@ def test_export_c3d_of_a_natnet_recording_gives_the_labelled_markers(
                      "--out", str(out)])  # fmt: skip
     assert code == 0, capsys.readouterr().err
     seq, data = _recorded(out)
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0
+    assert f"10 labelled 3-D markers: {' '.join(scene.labels)}" in capsys.readouterr().out
     assert main(["export", str(out), "--c3d", str(c3d)]) == 0
     assert "converted" in capsys.readouterr().out
     trial = TRIAL_READERS[".c3d"](c3d)
