@@ -67,6 +67,7 @@ FAMILY_SETTINGS: dict[str, dict[str, tuple[str, Converter, str]]] = {
         "blobs": ("max_blobs", _int, "blobs per camera and frame at most"),
         "baud": ("baud", _baud, "line rate while streaming, or 'auto'"),
     },
+    "natnet": {"marker_set": ("marker_set", str, "marker set to record (default: the first)")},
 }
 
 #: ``spotlab record`` option -> setting key, the defaults for devices that do not say.

@@ -211,3 +211,15 @@ def test_a_server_that_falls_silent_and_returns_is_recorded_across_the_outage(
     row = {int(k): i for i, k in enumerate(t["frame"])}
     want = _as_served(t["markers_mm"][[row[int(k)] for k in seq]])
     np.testing.assert_array_equal(data[:, :, 0, :], want)
+
+
+def test_record_names_the_marker_sets_when_the_one_asked_for_is_missing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = NatNetScene(markers=4, cameras=2, rate_hz=100.0)
+    with NatNetServer(scene) as srv:
+        code = main(["record", "--device", f"natnet={srv.address},marker_set=nope",
+                     "--seconds", "1", "--out", str(tmp_path / "r.spj")])  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and len(err) == 1
+    assert "no marker set 'nope'; the server has ['walker']" in err[0]
