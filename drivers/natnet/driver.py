@@ -298,8 +298,8 @@ class NatNetDriver(Driver):
         for data, _ in self._pending:
             try:
                 f = parse_frame(split_packet(data)[1], self.server.version)
-            except NatNetFormatError as exc:
-                raise ProtocolError(f"{self.name}: bad NatNet frame: {exc}") from exc
+            except NatNetFormatError:
+                continue  # the decoder counts it
             stamps.append((f.frame_number, f.timestamp_s))
         if len(stamps) < 2:
             raise DeviceNotFound(f"{self.name}: the NatNet server at {self.port} sends no frames")

@@ -87,7 +87,8 @@ class Reader:
             raise NatNetFormatError(
                 f"payload ends at {len(self.data)} bytes, needs {self.pos + 4 * n}"
             )
-        x = np.frombuffer(self.data, "<f4", n, self.pos).astype(np.float64)
+        with np.errstate(invalid="ignore"):  # a signalling NaN is a NaN
+            x = np.frombuffer(self.data, "<f4", n, self.pos).astype(np.float64)
         self.pos += 4 * n
         return x
 

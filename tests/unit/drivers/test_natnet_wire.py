@@ -113,3 +113,22 @@ def test_address() -> None:
     assert parse_address("mocap.lab:1610") == ("mocap.lab", 1610)
     with pytest.raises(ConfigurationError):
         parse_address("127.0.0.1:0")
+
+
+@pytest.mark.parametrize("version", [(3, 1), (4, 1)])
+def test_damaged_packets_raise_only_the_documented_error(version: tuple[int, int]) -> None:
+    rng = np.random.default_rng(5)
+    golden = GOLDEN_FRAME_41 if version == (4, 1) else GOLDEN_FRAME_31
+    dec = NatNetDecoder(version, "walker", ["A", "B"])
+    for _ in range(3000):
+        data = bytearray(golden)
+        for _ in range(int(rng.integers(1, 6))):
+            data[int(rng.integers(0, len(data)))] = int(rng.integers(0, 256))
+        if rng.random() < 0.3:
+            data = data[: int(rng.integers(0, len(data)))]
+        dec.feed(bytes(data), 0)  # never raises: damage is counted
+        try:
+            parse_frame(bytes(data[4:]), version)
+        except NatNetFormatError:
+            pass
+    assert dec.stats.crc_errors + dec.stats.resyncs > 0
