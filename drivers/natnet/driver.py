@@ -4,9 +4,9 @@ The driver is a unicast NatNet client: from one UDP socket it sends
 ``NAT_CONNECT`` to the server's command port, reads the server info (NatNet
 version, clock), asks for the model descriptions (the marker set's labels), then
 receives the frames the server sends to that socket, sending ``NAT_KEEPALIVE``
-once a second. The first frames give the frame rate (NatNet does not describe
-it). Every datagram received is journalled raw; the stream is ``point3d``: the
-marker set's labelled markers, x, y, z in mm.
+once a second, and ``NAT_DISCONNECT`` when closed. The first frames give the
+frame rate (NatNet does not describe it). Every datagram received is journalled
+raw; the stream is ``point3d``: the marker set's labelled markers, x, y, z in mm.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from spotlab.drivers.base import Driver
 from spotlab.drivers.natnet.decoding import LAYOUT, NatNetDecoder
 from spotlab.drivers.natnet.wire import (
     MAJORS,
+    NAT_DISCONNECT,
     NAT_FRAMEOFDATA,
     NAT_KEEPALIVE,
     NAT_MODELDEF,
@@ -315,6 +316,11 @@ class NatNetDriver(Driver):
 
     def _close(self) -> None:
         if self._sock is not None:
+            if self.server is not None:
+                try:  # the server may stop sending to us at once
+                    self._sock.sendto(request(NAT_DISCONNECT), self.address)
+                except OSError:
+                    pass
             self._sock.close()
             self._sock = None
             self._tap_event("close", port=self.port)

@@ -96,6 +96,9 @@ def test_driver_reads_natnet_3_labels_rate_and_clock() -> None:
         with drv:
             blocks = [drv.recv(1.0) for _ in range(5)]
             meta = drv.metadata()
+            assert len(srv.clients) == 1
+        time.sleep(0.2)
+        assert srv.clients == {}, "NAT_DISCONNECT at close"
     assert drv.spec.kind == "point3d" and drv.spec.n_markers == 8
     assert drv.spec.rate_hz == 120.0 and drv.spec.tick_hz == 10_000_000
     assert drv.spec.metadata["marker_labels"] == list(scene.labels)
