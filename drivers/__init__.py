@@ -21,6 +21,7 @@ DRIVERS: dict[str, tuple[str, str]] = {
     "lsl": ("spotlab.drivers.lsl", "LslInletDriver"),
     "oak": ("spotlab.drivers.oak", "OakDriver"),
     "qualisys": ("spotlab.drivers.qualisys", "QualisysDriver"),
+    "natnet": ("spotlab.drivers.natnet", "NatNetDriver"),
 }
 
 

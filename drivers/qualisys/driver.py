@@ -159,7 +159,7 @@ class QualisysDriver(Driver):
             tick_hz=1e6,
             values=("x", "y", "z"),
             units=("mm", "mm", "mm"),
-            metadata={"labels": list(params.labels), "bodies": list(params.bodies)},
+            metadata={"marker_labels": list(params.labels), "bodies": list(params.bodies)},
         )
         self._decoder = QualisysDecoder(len(params.labels), self.stats)
         self._tap_event("started", components="3D 6D")

@@ -1,9 +1,9 @@
-"""A recording's labelled 3-D marker stream (a QTM server's) as a trial, no reconstruction.
+"""A recording's labelled 3-D marker stream (QTM's, Motive's) as a trial, no reconstruction.
 
-A stream of kind ``point3d`` whose spec names its markers (``spec.metadata["labels"]``,
-as :class:`~spotlab.drivers.qualisys.QualisysDriver` writes) already holds labelled
+A stream of kind ``point3d`` whose spec names its markers (``spec.metadata["marker_labels"]``,
+as the Qualisys and NatNet drivers write) already holds labelled
 trajectories: ``spotlab export --c3d`` writes them as they are. Frames are placed by
-their sequence number (QTM's frame number), so frames the device lost and outages
+their sequence number (the system's own frame number), so frames the device lost and outages
 are NaN rows and the time axis stays true.
 """
 
@@ -25,7 +25,7 @@ MAX_FILL = 1_000_000
 
 def _labels(meta: dict[str, Any]) -> list[str] | None:
     spec = meta.get("spec") or {}
-    labels = (spec.get("metadata") or {}).get("labels")
+    labels = (spec.get("metadata") or {}).get("marker_labels")
     if spec.get("kind") != "point3d" or not isinstance(labels, list) or not labels:
         return None
     if spec.get("n_markers") != len(labels) or tuple(spec.get("values", ())) != ("x", "y", "z"):

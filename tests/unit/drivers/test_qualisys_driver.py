@@ -109,7 +109,7 @@ def test_labels_and_bodies_in_the_recording(tmp_path: Path) -> None:
         finally:
             driver.close()
     meta = driver.metadata()
-    assert meta["spec"]["metadata"]["labels"] == list(server.scene.labels)
+    assert meta["spec"]["metadata"]["marker_labels"] == list(server.scene.labels)
     assert meta["qtm"]["rate_hz"] == 50.0 and meta["spec"]["rate_hz"] == 50.0
     assert meta["spec"]["kind"] == "point3d" and meta["spec"]["n_markers"] == 12
     assert meta["spec"]["metadata"]["bodies"] == []  # the first 12 labels hold no cluster

@@ -185,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
             "rate_hz": trial.point_rate,
         }
     elif suffix == ".spj" and args.calibration is None and (found := labelled_trial(path)):
-        trial, summary = found  # labelled 3-D markers (a QTM server's): written as they are
+        trial, summary = found  # labelled 3-D markers (QTM's, Motive's): written as they are
     elif suffix in OBSERVATION_SUFFIXES:
         if args.calibration is None and suffix != ".spj":
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")

@@ -51,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
                 f"reconnects {s['reconnects']}, device resets {s.get('device_resets', 0)}"
             )
         extra = s.get("device_summary") or {}
+        if "labels" in extra:  # labelled 3-D markers (NatNet)
+            print(f"      {len(extra['labels'])} labelled 3-D markers: {' '.join(extra['labels'])}")
         if "blobs_per_frame" in extra:
             print(
                 f"      blobs {extra['blobs']} ({extra['blobs_per_frame']:.1f} per frame), "

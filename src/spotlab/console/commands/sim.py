@@ -9,6 +9,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from spotlab.console.commands import sim_natnet
 from spotlab.console.commands.sim_qualisys import add_qualisys_arguments, run_qualisys
 from spotlab.console.errors import CommandError
 from spotlab.io import FileFormatError
@@ -39,7 +40,9 @@ def add_parser(sub: Any) -> None:
         "(Ctrl-C, SIGTERM) or until --seconds have passed.",
     )
     p.add_argument(
-        "family", choices=["selspot", "timer", "centroid", "qualisys"], help="device family"
+        "family",
+        choices=["selspot", "timer", "centroid", "qualisys", "natnet"],
+        help="device family",
     )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
@@ -193,6 +196,11 @@ def add_parser(sub: Any) -> None:
         help="write the markers' model (truth labels, rigid clusters, distance links) as JSON "
         "for spotlab record --model / spotlab reconstruct --model",
     )  # fmt: skip
+    p.add_argument(
+        "--port", type=int, default=0,
+        help="qualisys: TCP port, natnet: UDP command port, on 127.0.0.1 (default 0: any free)",
+    )  # fmt: skip
+    sim_natnet.add_arguments(p)
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     add_qualisys_arguments(p)
     p.set_defaults(run=run)
@@ -369,6 +377,8 @@ def check_args(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.family == "qualisys":
         return run_qualisys(args)
+    if args.family == "natnet":
+        return sim_natnet.run(args)
     check_args(args)
     if args.family == "centroid":
         if args.tcp is not None:

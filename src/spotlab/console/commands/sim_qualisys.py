@@ -23,9 +23,6 @@ def add_qualisys_arguments(p: Any) -> None:
     g = p.add_argument_group("qualisys (QTM real-time server; also --cameras, --markers, "
                              "--rate, --seed, --faults drop@T[:N],disconnect@T[:S], "
                              "--truth T.npz, --seconds)")  # fmt: skip
-    g.add_argument(
-        "--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: any free port)"
-    )
     g.add_argument("--password", help="password TakeControl must give (default: none)")
 
 

@@ -1,0 +1,151 @@
+"""NatNet packets to frame blocks, live and from a recording's journal.
+
+The driver journals every datagram it receives as it arrived; a packet's header
+(u16 id, u16 size) makes the journal self-delimiting, so the decoder cuts packets
+out of any split of the bytes. Frames (``NAT_FRAMEOFDATA``) of the recorded
+marker set become rows of a ``point3d`` block: one sensor, the set's markers in
+the model description's order, x, y, z in mm. ``seq`` is the NatNet frame number,
+``ticks`` the camera mid-exposure stamp (ticks of the server's high-resolution
+clock; the timestamp in µs before NatNet 3), ``status`` the frame params. Server
+info and model descriptions in the stream are skipped (the metadata holds them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from spotlab.core.errors import ConfigurationError
+from spotlab.core.frames import FrameBlock
+from spotlab.core.stats import LinkStats
+from spotlab.drivers.natnet.wire import (
+    HEADER,
+    MAJORS,
+    MESSAGE_IDS,
+    NAT_FRAMEOFDATA,
+    FrameOfData,
+    NatNetFormatError,
+    Version,
+    parse_frame,
+)
+
+#: What ``spotlab.drivers.natnet`` writes as ``layout`` in a recording's metadata.
+LAYOUT = "natnet-datagrams"
+
+
+class NatNetDecoder:
+    """Packets of one NatNet stream to frame blocks of its marker set.
+
+    Parameters
+    ----------
+    version : tuple of int
+        The server's NatNet version (major, minor).
+    marker_set : str
+        The marker set whose markers are the stream's.
+    labels : sequence of str
+        Its marker names (M).
+    stats : LinkStats, optional
+    """
+
+    def __init__(
+        self,
+        version: Version,
+        marker_set: str,
+        labels: Sequence[str],
+        stats: LinkStats | None = None,
+    ) -> None:
+        if version[0] not in MAJORS:
+            raise ConfigurationError(f"NatNet {version[0]}.{version[1]} is not 3.x or 4.x")
+        self.version = version
+        self.marker_set = marker_set
+        self.labels = tuple(labels)
+        self.stats = stats if stats is not None else LinkStats()
+        self._buf = bytearray()
+        self._last: int | None = None
+        #: The last frame decoded (its rigid bodies, labelled markers, timecode).
+        self.last_frame: FrameOfData | None = None
+
+    def feed(self, data: bytes, arrival_ns: int) -> FrameBlock:
+        """Decode the complete packets in ``data`` after what is buffered."""
+        self._buf += data
+        rows: list[FrameOfData] = []
+        while len(self._buf) >= HEADER.size:
+            message_id, size = HEADER.unpack_from(self._buf)
+            if message_id not in MESSAGE_IDS:
+                del self._buf[:1]
+                self.stats.resyncs += 1
+                self.stats.bytes_skipped += 1
+                continue
+            if len(self._buf) < HEADER.size + size:
+                break
+            payload = bytes(self._buf[HEADER.size : HEADER.size + size])
+            del self._buf[: HEADER.size + size]
+            if message_id != NAT_FRAMEOFDATA:
+                continue
+            try:
+                frame = parse_frame(payload, self.version)
+            except NatNetFormatError:
+                self.stats.crc_errors += 1
+                continue
+            if self._accept(frame.frame_number):
+                rows.append(frame)
+        return self._block(rows, arrival_ns)
+
+    def _accept(self, number: int) -> bool:
+        last = self._last
+        if last is not None and number <= last:
+            self.stats.duplicates += 1
+            return False
+        if last is not None and number > last + 1:
+            self.stats.lost_frames += number - last - 1
+            self.stats.gaps += 1
+        self._last = number
+        self.stats.frames += 1
+        return True
+
+    def _block(self, rows: list[FrameOfData], arrival_ns: int) -> FrameBlock:
+        m = len(self.labels)
+        if not rows:
+            return FrameBlock.empty(m, 1, 3)
+        self.last_frame = rows[-1]
+        n = len(rows)
+        data = np.full((n, m, 1, 3), np.nan)
+        for i, f in enumerate(rows):
+            x = f.marker_sets.get(self.marker_set)
+            if x is not None and x.shape[0] == m:
+                data[i, :, 0] = x * 1000.0
+        if self.version >= (3, 0):
+            ticks = [f.stamps[0] for f in rows]
+        else:
+            ticks = [round(f.timestamp_s * 1e6) for f in rows]
+        return FrameBlock(
+            seq=np.asarray([f.frame_number for f in rows], dtype=np.int64),
+            ticks=np.asarray(ticks, dtype=np.int64),
+            arrival_ns=np.full(n, arrival_ns, dtype=np.int64),
+            data=data,
+            flags=np.zeros((n, m, 1), dtype=np.uint8),
+            status=np.asarray([f.params for f in rows], dtype=np.uint16),
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """Figures for ``spotlab info``: the marker set, its labels, the NatNet version."""
+        return {
+            "natnet_version": f"{self.version[0]}.{self.version[1]}",
+            "marker_set": self.marker_set,
+            "labels": list(self.labels),
+        }
+
+    def mark_discontinuity(self) -> None:
+        """Drop a partial packet; frame numbers are not joined across the break."""
+        self._buf.clear()
+        self._last = None
+
+
+def decoder_from_metadata(meta: Mapping[str, Any]) -> NatNetDecoder:
+    """The decoder of a recorded NatNet stream, from ``NatNetDriver.metadata()``."""
+    version = meta["natnet_version"]
+    return NatNetDecoder(
+        (int(version[0]), int(version[1])), str(meta["marker_set"]), list(meta["labels"])
+    )

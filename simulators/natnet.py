@@ -1,0 +1,311 @@
+"""A simulated OptiTrack Motive NatNet server on 127.0.0.1 (docs/protocols/natnet.md).
+
+:class:`NatNetServer` binds a command socket (the address a client connects to)
+and a data socket on the loopback interface, answers ``NAT_CONNECT`` with the
+server info and ``NAT_REQUEST_MODELDEF`` with the model descriptions, and sends
+one ``NAT_FRAMEOFDATA`` per frame period: unicast to every client that connected
+(to the address its connect came from), or, with ``multicast=True``, to a group
+on the loopback interface (tests only). Frames are numbered from the server's
+start; the first client's connect anchors the fault schedule. Every frame sent
+goes to the truth (:class:`NatNetTruth`) when one is given.
+
+Faults (``faults``, comma-separated, times in s after the first connect):
+``drop@T`` (the frame due at T is not sent), ``drop@T:N`` (N frames from T),
+``disconnect@T`` (the server falls silent for good: no frames, no replies) and
+``disconnect@T:D`` (silent for D s, then back; frame numbers go on).
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from spotlab.simulators import natnet_wire as nw
+from spotlab.simulators.natnet_scene import MODEL_ID, NatNetScene
+
+F64 = npt.NDArray[np.float64]
+
+#: Seconds after which a unicast client that sent nothing is forgotten.
+CLIENT_TIMEOUT_S = 10.0
+CLOCK_HZ = 10_000_000
+MULTICAST_GROUP = "239.255.42.99"
+
+
+@dataclass(frozen=True)
+class NatNetFault:
+    """One scheduled fault: ``kind`` (drop, disconnect), time ``at_s``, and ``n`` frames
+    (drop) or ``duration_s`` (disconnect; inf: for good)."""
+
+    kind: str
+    at_s: float
+    n: int = 1
+    duration_s: float = float("inf")
+
+
+def parse_faults(text: str) -> list[NatNetFault]:
+    """``drop@T[:N]`` and ``disconnect@T[:D]`` items, comma-separated.
+
+    Raises
+    ------
+    ValueError
+        On an unknown kind or a bad number.
+    """
+    out = []
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        kind, at, rest = item.partition("@")
+        when, _, arg = rest.partition(":")
+        try:
+            if not at:
+                raise ValueError
+            at_s = float(when)
+            if kind == "drop":
+                out.append(NatNetFault("drop", at_s, n=int(arg) if arg else 1))
+            elif kind == "disconnect":
+                out.append(NatNetFault("disconnect", at_s, duration_s=float(arg or "inf")))
+            else:
+                raise ValueError
+        except ValueError:
+            raise ValueError(
+                f"fault {item!r}: expected drop@T[:N] or disconnect@T[:SECONDS]"
+            ) from None
+        if not at_s >= 0:
+            raise ValueError(f"fault {item!r}: T must be >= 0 s")
+    return out
+
+
+@dataclass
+class NatNetTruth:
+    """The frames served: frame number, time (s) and markers (mm), written as ``.npz``."""
+
+    path: Path
+    labels: tuple[str, ...]
+    frames: list[int] = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+    markers: list[F64] = field(default_factory=list)
+    dropped: list[int] = field(default_factory=list)
+
+    def add(self, frame: int, t_s: float, x_mm: F64) -> None:
+        self.frames.append(frame)
+        self.times.append(t_s)
+        self.markers.append(np.array(x_mm, dtype=np.float64))
+
+    def write(self) -> None:
+        """Write ``time_s`` (F,), ``markers_mm`` (F, M, 3), ``labels`` (M,), ``frame`` (F,),
+        ``dropped`` (frame numbers not sent)."""
+        m = len(self.labels)
+        x = np.stack(self.markers) if self.markers else np.zeros((0, m, 3))
+        np.savez(
+            self.path,
+            time_s=np.asarray(self.times, dtype=np.float64),
+            markers_mm=x,
+            labels=np.asarray(self.labels, dtype=str),
+            frame=np.asarray(self.frames, dtype=np.int64),
+            dropped=np.asarray(self.dropped, dtype=np.int64),
+        )
+
+
+class NatNetServer:
+    """The simulated Motive: command and data sockets on 127.0.0.1, a serving thread.
+
+    Parameters
+    ----------
+    scene : NatNetScene
+    version : tuple of int
+        NatNet version served, (3, 1) or (4, 1).
+    port : int
+        Command port (0: any free port); the data socket takes any free port, or
+        ``port + 1`` with multicast (clients join the group on the data port).
+    truth : path, optional
+        Where :meth:`stop` writes the truth (``.npz``).
+    faults : str
+        Fault schedule (see the module docstring).
+    multicast : bool
+        Send frames to ``239.255.42.99`` on the loopback interface instead of unicast.
+    """
+
+    def __init__(
+        self,
+        scene: NatNetScene,
+        *,
+        version: nw.Version = (4, 1),
+        port: int = 0,
+        truth: Path | None = None,
+        faults: str = "",
+        multicast: bool = False,
+    ) -> None:
+        if version not in nw.VERSIONS:
+            raise ValueError(f"NatNet version {version} is not one of {nw.VERSIONS}")
+        self.scene = scene
+        self.version = version
+        self.multicast = multicast
+        self.faults = parse_faults(faults)
+        self.truth = NatNetTruth(truth, scene.labels) if truth is not None else None
+        self.cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.cmd.bind(("127.0.0.1", port))
+        self.port = self.cmd.getsockname()[1]
+        self.data = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        if multicast:
+            self.data.bind(("127.0.0.1", self.port + 1))
+            self.data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+            self.data.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            self.data.setsockopt(
+                socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1")
+            )
+        else:
+            self.data.bind(("127.0.0.1", 0))
+        self.data_port = self.data.getsockname()[1]
+        self.clients: dict[tuple[str, int], float] = {}
+        self.frames_sent = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._start_s = 0.0
+        self._anchor_s: float | None = None
+        self._next = 0
+        self._modeldef = nw.model_definitions(
+            version, "walker", scene.labels, scene.rigid_bodies(), scene.cameras()
+        )
+
+    @property
+    def address(self) -> str:
+        """``host:port`` a client connects to."""
+        return f"127.0.0.1:{self.port}"
+
+    # -- life cycle ----------------------------------------------------------------
+    def start(self) -> NatNetServer:
+        """Start streaming (frame 0 is due now) in a thread of its own."""
+        self._start_s = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="natnet-sim", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread, close the sockets, write the truth."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.cmd.close()
+        self.data.close()
+        if self.truth is not None:
+            self.truth.write()
+
+    def __enter__(self) -> NatNetServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- serving -------------------------------------------------------------------
+    def _silent(self, now: float) -> bool:
+        if self._anchor_s is None:
+            return False
+        t = now - self._anchor_s
+        return any(
+            f.kind == "disconnect" and f.at_s <= t < f.at_s + f.duration_s for f in self.faults
+        )
+
+    def _dropped(self, k: int) -> bool:
+        """Whether frame ``k`` is one of a drop's: the first frame due at or after the
+        drop's time and the ``n - 1`` after it."""
+        if self._anchor_s is None:
+            return False
+        rate = self.scene.rate_hz
+        for f in self.faults:
+            if f.kind == "drop":
+                first = math.ceil((self._anchor_s - self._start_s + f.at_s) * rate - 1e-9)
+                if first <= k < first + f.n:
+                    return True
+        return False
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            now = time.monotonic()
+            due = self._start_s + self._next / self.scene.rate_hz
+            wait = max(0.0, due - now)
+            ready, _, _ = select.select([self.cmd], [], [], min(wait, 0.05))
+            if ready:
+                self._on_command(time.monotonic())
+                continue
+            if time.monotonic() >= due:
+                self._send_frame(self._next)
+                self._next += 1
+
+    def _on_command(self, now: float) -> None:
+        try:
+            data, addr = self.cmd.recvfrom(65536)
+        except OSError:
+            return
+        if self._silent(now):
+            return
+        try:
+            message_id, _ = nw.parse_packet(data)
+        except ValueError:
+            return  # not NatNet: ignored, as a server on a shared port would
+        if message_id == nw.NAT_CONNECT:
+            if self._anchor_s is None:
+                self._anchor_s = now
+            self.clients[addr] = now
+            info = nw.server_info(
+                self.version,
+                clock_hz=CLOCK_HZ,
+                data_port=self.data_port,
+                multicast=self.multicast,
+                group=MULTICAST_GROUP,
+            )
+            self.cmd.sendto(info, addr)
+        elif message_id == nw.NAT_REQUEST_MODELDEF:
+            self.clients[addr] = now
+            self.cmd.sendto(self._modeldef, addr)
+        elif message_id == nw.NAT_KEEPALIVE:
+            if addr in self.clients:
+                self.clients[addr] = now
+        elif message_id == nw.NAT_DISCONNECT:
+            self.clients.pop(addr, None)
+        elif message_id in (nw.NAT_REQUEST, nw.NAT_REQUEST_FRAMEOFDATA):
+            self.cmd.sendto(nw.packet(nw.NAT_UNRECOGNIZED_REQUEST, b""), addr)
+
+    def _send_frame(self, k: int) -> None:
+        now = time.monotonic()
+        for addr, seen in list(self.clients.items()):
+            if now - seen > CLIENT_TIMEOUT_S:
+                del self.clients[addr]
+        if not self.clients and not self.multicast:
+            return
+        t = float(self.scene.time_s(k))
+        if self._silent(now):
+            return
+        if self._dropped(k):
+            if self.truth is not None:
+                self.truth.dropped.append(k)
+            return
+        x = self.scene.markers_mm(np.array([t]))[0]
+        tc, sub = nw.timecode(t)
+        mid = round(t * CLOCK_HZ)
+        content = nw.FrameContent(
+            frame_number=k,
+            marker_set="walker",
+            markers_m=x / 1000.0,
+            labelled_ids=[MODEL_ID << 16 | (i + 1) for i in range(x.shape[0])],
+            timecode=tc,
+            timecode_sub=sub,
+            timestamp_s=t,
+            stamps=(mid, mid + CLOCK_HZ // 500, mid + 3 * CLOCK_HZ // 1000),
+            rigid_bodies=self.scene.poses(x),
+        )
+        pkt = nw.frame_of_data(self.version, content)
+        targets = [(MULTICAST_GROUP, self.data_port)] if self.multicast else list(self.clients)
+        for addr in targets:
+            try:
+                self.data.sendto(pkt, addr)
+            except OSError:
+                continue
+        self.frames_sent += 1
+        if self.truth is not None:
+            self.truth.add(k, t, x)
