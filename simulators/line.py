@@ -151,11 +151,6 @@ class TxLine:
             total += len(c.data) - c.n_done(t_ns)
         return total
 
-    def unreleased(self) -> int:
-        """Bytes queued and not yet handed to the transport (:meth:`release`): those still
-        to go on the line, and those already on it that the transport has not taken."""
-        return sum(len(c.data) - c.released for c in self.chunks)
-
     def add_burst(self, t0: int, t1: int, fault_id: int, rng: np.random.Generator) -> None:
         """Damage (XOR with non-zero random bytes) every byte completing in [t0, t1)."""
         w = _Window(t0, t1, fault_id, rng)

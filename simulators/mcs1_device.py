@@ -115,8 +115,6 @@ class Mcs1Device(Mcs1Commands[ConfigT]):
         #: transport sets it): flow control holds them in the FIFO, so a host that
         #: falls behind sees whole frames dropped, never frames cut into CRC errors.
         self.host_backlog = 0
-        #: Set by a transport that takes the device's output when it polls (pty, TCP).
-        self.host_polls = False
         #: Resets and power-ups so far, and the world ns of the latest (a transport
         #: clears the bytes it holds back).
         self.resets = 0
@@ -363,16 +361,6 @@ class Mcs1Device(Mcs1Commands[ConfigT]):
         self.line.enqueue(wire.BANNER, t, self._baud, "banner")
 
     # ----------------------------------------------------------- streaming
-    def _fifo_used(self, t: int) -> int:
-        """Bytes the FIFO holds at ``t``: still to go on the line, plus what the host has
-        not taken (``host_backlog``). Behind a transport that polls (``host_polls``),
-        bytes that went on the line since it last took them count too: while a device
-        that fell behind catches up, they reach the host's buffer only at the next poll."""
-        line = self.line.backlog(t)
-        if self.host_polls:
-            line = self.line.unreleased()
-        return line + self.host_backlog
-
     def _on_frame(self, t: int) -> None:
         stream = self._stream
         assert stream is not None
@@ -388,7 +376,7 @@ class Mcs1Device(Mcs1Commands[ConfigT]):
         if self._overflow_left > 0:
             self._overflow_left -= 1
             drop = self._drop_entry
-        elif self._fifo_used(t) + size > self.fifo_bytes:
+        elif self.line.backlog(t) + self.host_backlog + size > self.fifo_bytes:
             last = self._drop_entry
             if last is None or last.kind != "fifo" or last.frame_no[-1] != taken.frame_no - 1:
                 last = log.new("fifo", self.faults.since_start(t), t, "device", None)

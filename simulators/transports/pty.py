@@ -42,7 +42,9 @@ MAX_WAIT_S = 0.05
 #: back (what waits beyond this counts against the device's FIFO).
 HOST_SLACK = 1 << 16
 #: A device more than this far behind real time (ns) catches up in steps of this length,
-#: writing to the port between them.
+#: writing to the port between them. What one step adds (12 kB at 12 Mbaud) must stay
+#: within HOST_SLACK: the device judges its FIFO by the host backlog read before the
+#: step, and bytes beyond the buffer's limit would be cut mid-frame (CRC errors).
 CATCH_UP_NS = 10_000_000
 
 
@@ -86,7 +88,6 @@ class PtyServer:
 
     def __init__(self, device: Mcs1Device, name: str = "selspot") -> None:
         self.device = device
-        device.host_polls = True  # its output is taken when this loop polls
         self._dir = Path(tempfile.mkdtemp(prefix="spotlab-sim-"))
         self.path = self._dir / name
         self.stats = {"bytes_out": 0, "bytes_in": 0, "overrun_bytes": 0, "reconnects": 0}
@@ -176,6 +177,7 @@ class PtyServer:
                 now = served = real  # nothing to send while the port is away: keep time
                 if self._master is not None:
                     self._close_pty()
+                self.device.output_segments(now)  # what went on the dead link is lost
                 back = self.device.link_return_ns(now)
                 # Wake at least every MAX_WAIT_S: the device keeps running (and is kept
                 # caught up) while its port is away, ready to answer the moment it returns.

@@ -44,7 +44,6 @@ class TcpServer:
 
     def __init__(self, device: Mcs1Device, port: int = 0) -> None:
         self.device = device
-        device.host_polls = True  # its output is taken when this loop polls
         self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:

@@ -20,14 +20,10 @@ from spotlab.reconstruction.identification import MarkerModel
 from spotlab.simulators.centroid import CentroidDevice
 from spotlab.simulators.rigs import ring_rig
 
-__all__ = ["LINK_SPREAD_MM", "MODEL_SECONDS", "body_marker_model", "write_body_model"]
+__all__ = ["MODEL_SECONDS", "body_marker_model", "write_body_model"]
 
 #: Walk sampled to learn the model (s): more than three strides of the 0.9 Hz gait.
 MODEL_SECONDS = 4.0
-#: Marker pairs whose distance varies by less than this over the walk become links (mm):
-#: the toe markers swing 60-80 mm against every other marker once they no longer slide
-#: along the floor.
-LINK_SPREAD_MM = 80.0
 
 
 def body_marker_model(markers: int = 40, seed: int = 0, *, rate_hz: float = 50.0) -> MarkerModel:
@@ -56,7 +52,10 @@ def body_marker_model(markers: int = 40, seed: int = 0, *, rate_hz: float = 50.0
     """
     device = CentroidDevice(ring_rig(8), markers=markers, seed=seed)
     t = np.arange(round(MODEL_SECONDS * rate_hz)) / rate_hz
-    return MarkerModel.infer(device.labels, device.positions(t), link_spread_mm=LINK_SPREAD_MM)
+    # infer's defaults: the links' spread is chosen from the walk, and a marker on no
+    # cluster is linked to its 3 least varying partners too (a subject's toe marker swings
+    # 60-100 mm against every other marker; a fixed 60 or 80 mm left some without links).
+    return MarkerModel.infer(device.labels, device.positions(t))
 
 
 def write_body_model(path: str | os.PathLike[str], markers: int = 40, seed: int = 0) -> None:
