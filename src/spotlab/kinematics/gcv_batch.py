@@ -82,18 +82,23 @@ class _Channels:
         self,
         cols: NDArray[np.intp],
         values: FloatArray,
-        log_p: float,
+        log_p: float | FloatArray,
         fit: FloatArray,
         rss: FloatArray,
-        rdof: float,
+        rdof: float | FloatArray,
     ) -> None:
-        """Remember the fits of channels ``cols`` (fit (N, len(cols))) that beat their best."""
+        """Remember the fits of channels ``cols`` (fit (N, len(cols))) that beat their best.
+
+        ``log_p`` and ``rdof`` are one value for all the channels or one each.
+        """
         better = values < self.best_value[cols]
         if np.any(better):
             chosen = cols[better]
-            self.best_value[chosen], self.best_log_p[chosen] = values[better], log_p
+            self.best_value[chosen] = values[better]
+            self.best_log_p[chosen] = log_p if np.isscalar(log_p) else np.asarray(log_p)[better]
             self.best_fit[:, chosen] = fit[:, better]
-            self.best_rss[chosen], self.best_rdof[chosen] = rss[better], rdof
+            self.best_rss[chosen] = rss[better]
+            self.best_rdof[chosen] = rdof if np.isscalar(rdof) else np.asarray(rdof)[better]
 
     def scan(self, grid: FloatArray) -> FloatArray:
         """Criterion of every channel at every grid point, shape (G, K)."""
@@ -157,6 +162,7 @@ class _Channels:
         # p as Python floats: numpy's vectorised power may differ from libm in the last bit
         ps = np.array([10.0**log_p * problem.factorial2 for log_p in log_ps])
         values = np.empty(len(ks))
+        at = np.array(log_ps)
         # the one-channel arithmetic, column by column: f = y - p (m!)^2 W^-1 Q delta
         for block in _column_blocks(len(ks)):
             scale = ps[None, block] * problem.winv[:, None]
@@ -165,9 +171,7 @@ class _Channels:
             # contiguous rows: each sum runs in the order of a one-column sum
             rss = np.ascontiguousarray((problem.w[:, None] * (y - fitted) ** 2).T).sum(axis=1)
             values[block] = _criterion(rss, rdof[block], n)
-            for j, i in enumerate(block):
-                self._keep(cols[i : i + 1], values[i : i + 1], log_ps[i], fitted[:, j : j + 1],
-                           rss[j : j + 1], float(rdof[i]))  # fmt: skip
+            self._keep(cols[block], values[block], at[block], fitted, rss, rdof[block])
         for i, k in enumerate(ks):
             out[k] = float(values[i])
         return out
