@@ -11,10 +11,16 @@ the same order, so the results are the per-channel ones to rounding:
   one multi-right-hand-side solve and one trace, the traces of all grid points
   in one recursion;
 * the refinements, whose points differ from channel to channel, run in
-  lockstep: each channel's bounded Brent search (:func:`~spotlab.kinematics._brent.bounded_brent`,
-  SciPy's ``minimize_scalar(method="bounded")`` step for step) is a generator
-  that yields its next point, and each round factors the channels' matrices and
-  computes all their traces in one recursion.
+  lockstep: each channel's bounded Brent search
+  (:func:`~spotlab.kinematics._brent.bounded_brent`, SciPy's
+  ``minimize_scalar(method="bounded")`` step for step) is a generator that
+  yields its next point, and each round factors the channels' matrices, hands
+  each factor to the trace as it comes and computes all their traces in one
+  recursion.
+
+Fits are computed :data:`COLUMN_BLOCK` channels at a time, so that their
+(N, channels) temporaries stay small; every column's arithmetic is the
+one-channel one whatever the block.
 """
 
 from __future__ import annotations
