@@ -113,6 +113,11 @@ class PenalisedSpline:
         """``tr(inv(A) R)`` (C,) for factors (C, m + 1, N - m) of this matrix at C values of p."""
         return self._trace.many(chol)
 
+    @property
+    def inverse_trace(self) -> _banded.InverseTrace:
+        """``tr(inv(A) R)`` of factors of this matrix, loaded one at a time (for batches)."""
+        return self._trace
+
     def solve(
         self, p: float, y: FloatArray, rhs: FloatArray | None = None
     ) -> tuple[FloatArray, FloatArray]:

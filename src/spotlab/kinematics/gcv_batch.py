@@ -11,22 +11,30 @@ the same order, so the results are the per-channel ones to rounding:
   one multi-right-hand-side solve and one trace, the traces of all grid points
   in one recursion;
 * the refinements, whose points differ from channel to channel, run in
-  lockstep: each channel's :func:`scipy.optimize.minimize_scalar` runs in its own
-  thread and waits for its criterion value, and each round factors the
-  channels' matrices and computes all their traces in one recursion.
+  lockstep: each channel's bounded Brent search
+  (:func:`~spotlab.kinematics._brent.bounded_brent`, SciPy's
+  ``minimize_scalar(method="bounded")`` step for step) is a generator that
+  yields its next point, and each round factors the channels' matrices, hands
+  each factor to the trace as it comes and computes all their traces in one
+  recursion.
+
+Fits are computed :data:`COLUMN_BLOCK` channels at a time, so that their
+(N, channels) temporaries stay small; every column's arithmetic is the
+one-channel one whatever the block.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, optimize
+from scipy import linalg
 from scipy.linalg import lapack
 
 from spotlab.kinematics import _banded
+from spotlab.kinematics._brent import bounded_brent
 from spotlab.kinematics.gcv import LONG_RECORD, FitStatistics, PenalisedSpline, gcv_fit
 
 FloatArray = NDArray[np.float64]
@@ -80,18 +88,23 @@ class _Channels:
         self,
         cols: NDArray[np.intp],
         values: FloatArray,
-        log_p: float,
+        log_p: float | FloatArray,
         fit: FloatArray,
         rss: FloatArray,
-        rdof: float,
+        rdof: float | FloatArray,
     ) -> None:
-        """Remember the fits of channels ``cols`` (fit (N, len(cols))) that beat their best."""
+        """Remember the fits of channels ``cols`` (fit (N, len(cols))) that beat their best.
+
+        ``log_p`` and ``rdof`` are one value for all the channels or one each.
+        """
         better = values < self.best_value[cols]
         if np.any(better):
             chosen = cols[better]
-            self.best_value[chosen], self.best_log_p[chosen] = values[better], log_p
+            self.best_value[chosen] = values[better]
+            self.best_log_p[chosen] = log_p if np.isscalar(log_p) else np.asarray(log_p)[better]
             self.best_fit[:, chosen] = fit[:, better]
-            self.best_rss[chosen], self.best_rdof[chosen] = rss[better], rdof
+            self.best_rss[chosen] = rss[better]
+            self.best_rdof[chosen] = rdof if np.isscalar(rdof) else np.asarray(rdof)[better]
 
     def scan(self, grid: FloatArray) -> FloatArray:
         """Criterion of every channel at every grid point, shape (G, K)."""
@@ -106,60 +119,106 @@ class _Channels:
             rows.append(g)
         if not chols:
             return values
-        everyone = np.arange(self.y.shape[1], dtype=np.intp)
-        # traces first (one recursion for all grid points), then one grid point's fits at a time
+        # traces first (one recursion for all grid points), then one grid point's fits at a
+        # time, a block of channels at a time (their temporaries are as large as the block)
         for g, r, chol in zip(rows, _rdof(problem, chols), chols, strict=True):
-            fitted, rss = _fits(problem, 10.0 ** float(grid[g]), chol, self.y, self.rhs)
-            values[g] = _criterion(rss, np.full(rss.shape, r), n)
-            self._keep(everyone, values[g], float(grid[g]), fitted, rss, float(r))
+            p = 10.0 ** float(grid[g])
+            for cols in _column_blocks(self.y.shape[1]):
+                fitted, rss = _fits(problem, p, chol, self.y[:, cols], self.rhs[:, cols])
+                values[g, cols] = _criterion(rss, np.full(rss.shape, r), n)
+                self._keep(cols, values[g, cols], float(grid[g]), fitted, rss, float(r))
         return values
 
     def evaluate(self, points: dict[int, float]) -> dict[int, float]:
         """Criterion of channel k at ``log10 p = points[k]``, each at its own p."""
         problem, n = self.problem, self.problem.n_eff
         out = dict.fromkeys(points, float(np.inf))
-        stack = np.empty((len(points), *problem.r.shape))
+        # channels asking for the same p (the first Brent point of a shared bracket) share
+        # its factor and trace
+        sharing: dict[float, list[int]] = {}
+        for k, log_p in points.items():
+            sharing.setdefault(log_p, []).append(k)
+        trace = problem.inverse_trace
+        trace.prepare(len(sharing))
         delta = np.empty((problem.r.shape[1], len(points)))
         ks: list[int] = []
         log_ps: list[float] = []
-        # channels asking for the same p (the first Brent point of a shared bracket) share
-        # its factor and trace
-        factor_of: dict[float, int] = {}
-        which: list[int] = []
-        for k, log_p in points.items():
-            if log_p not in factor_of:
-                try:
-                    stack[len(factor_of)] = problem.factor(10.0**log_p)
-                except linalg.LinAlgError:
-                    continue
-                factor_of[log_p] = len(factor_of)
-            chol = stack[factor_of[log_p]]
-            solved, info = lapack.dpbtrs(chol, self.rhs[:, k : k + 1], lower=0)
-            if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
-                raise linalg.LinAlgError(f"banded solve failed (info {info})")
-            delta[:, len(ks)] = solved[:, 0]
-            which.append(factor_of[log_p])
-            ks.append(k)
-            log_ps.append(log_p)
+        which: list[int] = []  # the factor of each evaluation
+        factors = 0
+        for log_p, members in sharing.items():
+            try:
+                chol = problem.factor(10.0**log_p)
+            except linalg.LinAlgError:
+                continue
+            # the trace keeps what it needs: the next factor overwrites this one
+            trace.load(factors, chol)
+            for k in members:
+                solved, info = lapack.dpbtrs(chol, self.rhs[:, k : k + 1], lower=0)
+                if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
+                    raise linalg.LinAlgError(f"banded solve failed (info {info})")
+                delta[:, len(ks)] = solved[:, 0]
+                which.append(factors)
+                ks.append(k)
+                log_ps.append(log_p)
+            factors += 1
         if not ks:
             return out
-        count = len(ks)
+        rdof = np.maximum(problem.r.shape[1] - trace.run(factors), np.finfo(float).tiny)[which]
         cols = np.array(ks, dtype=np.intp)
-        # the one-channel arithmetic, column by column: f = y - p (m!)^2 W^-1 Q delta
         # p as Python floats: numpy's vectorised power may differ from libm in the last bit
         ps = np.array([10.0**log_p * problem.factorial2 for log_p in log_ps])
-        scale = ps[None, :] * problem.winv[:, None]
-        y = self.y[:, cols]
-        fitted = y - scale * _banded.q_times(problem.q, delta[:, :count])
-        # contiguous rows: each sum runs in the order of a one-column sum
-        rss = np.ascontiguousarray((problem.w[:, None] * (y - fitted) ** 2).T).sum(axis=1)
-        rdof = _rdof(problem, stack[: len(factor_of)])[which]
-        values = _criterion(rss, rdof, n)
+        values = np.empty(len(ks))
+        at = np.array(log_ps)
+        # the one-channel arithmetic, column by column: f = y - p (m!)^2 W^-1 Q delta
+        for block in _column_blocks(len(ks)):
+            scale = ps[None, block] * problem.winv[:, None]
+            y = self.y[:, cols[block]]
+            fitted = y - scale * _banded.q_times(problem.q, delta[:, block])
+            # contiguous rows: each sum runs in the order of a one-column sum
+            rss = np.ascontiguousarray((problem.w[:, None] * (y - fitted) ** 2).T).sum(axis=1)
+            values[block] = _criterion(rss, rdof[block], n)
+            self._keep(cols[block], values[block], at[block], fitted, rss, rdof[block])
         for i, k in enumerate(ks):
             out[k] = float(values[i])
-            self._keep(cols[i : i + 1], values[i : i + 1], log_ps[i], fitted[:, i : i + 1],
-                       rss[i : i + 1], float(rdof[i]))  # fmt: skip
         return out
+
+
+#: Channels whose fits are computed together (bounds the (N, channels) temporaries).
+COLUMN_BLOCK = 16
+
+
+def _column_blocks(count: int) -> list[NDArray[np.intp]]:
+    """Indices ``0 .. count - 1`` in blocks of at most :data:`COLUMN_BLOCK`."""
+    return [
+        np.arange(start, min(start + COLUMN_BLOCK, count), dtype=np.intp)
+        for start in range(0, count, COLUMN_BLOCK)
+    ]
+
+
+def _step_together(
+    searches: dict[int, Generator[float, float, tuple[float, float]]],
+    evaluate: Callable[[dict[int, float]], dict[int, float]],
+) -> dict[int, tuple[float, float]]:
+    """Step the searches side by side, evaluating their points in batches.
+
+    Each search yields one point at a time and is sent its criterion value; a
+    round evaluates the pending points of every unfinished search in one call to
+    ``evaluate``. Returns each search's result (its generator's return value).
+    """
+    results: dict[int, tuple[float, float]] = {}
+    pending: dict[int, float] = {}
+    for k, search in searches.items():
+        pending[k] = float(next(search))
+    while pending:
+        values = evaluate(pending)
+        ahead: dict[int, float] = {}
+        for k in pending:
+            try:
+                ahead[k] = float(searches[k].send(values[k]))
+            except StopIteration as done:
+                results[k] = done.value
+        pending = ahead
+    return results
 
 
 def _lockstep(
@@ -167,6 +226,10 @@ def _lockstep(
     evaluate: Callable[[dict[int, float]], dict[int, float]],
 ) -> dict[int, float]:
     """Run ``tasks[k](criterion)`` side by side, evaluating their criteria in batches.
+
+    The form of :func:`_step_together` for searches written as functions of a
+    criterion (any SciPy minimiser), at the cost of a thread per task;
+    :func:`gcv_fit_many` steps generators instead.
 
     Each task runs in its own thread and calls its criterion with one point at a
     time; a round starts when every unfinished task waits for a value, and
@@ -266,28 +329,18 @@ def gcv_fit_many(
     grid = np.arange(lo, hi + step, step)
     values = channels.scan(grid)
     log_p = np.full(k_all, float(grid[-1]))
-    tasks: dict[int, Callable[[Callable[[float], float]], float]] = {}
+    searches: dict[int, Generator[float, float, tuple[float, float]]] = {}
+    bounds: dict[int, float] = {}
     for k in range(k_all):
         if not np.any(np.isfinite(values[:, k])):
             continue
         best = int(np.argmin(values[:, k]))
         a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
         log_p[k] = float(grid[best])
-
-        def refine(
-            criterion: Callable[[float], float],
-            a: float = a,
-            b: float = b,
-            bound: float = values[best, k],
-        ) -> float:
-            res = optimize.minimize_scalar(
-                criterion, bounds=(a, b), method="bounded", options={"xatol": 1e-6}
-            )
-            return float(res.x) if res.fun <= bound else float("nan")
-
-        tasks[k] = refine
-    for k, refined in _lockstep(tasks, channels.evaluate).items():
-        if np.isfinite(refined):
+        searches[k] = bounded_brent(float(a), float(b), xatol=1e-6)
+        bounds[k] = float(values[best, k])
+    for k, (refined, value) in _step_together(searches, channels.evaluate).items():
+        if value <= bounds[k]:
             log_p[k] = refined
     return _finish(channels, log_p)
 
