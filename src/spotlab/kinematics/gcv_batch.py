@@ -25,7 +25,6 @@ one-channel one whatever the block.
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Generator
 
 import numpy as np
@@ -218,86 +217,6 @@ def _step_together(
             except StopIteration as done:
                 results[k] = done.value
         pending = ahead
-    return results
-
-
-def _lockstep(
-    tasks: dict[int, Callable[[Callable[[float], float]], float]],
-    evaluate: Callable[[dict[int, float]], dict[int, float]],
-) -> dict[int, float]:
-    """Run ``tasks[k](criterion)`` side by side, evaluating their criteria in batches.
-
-    The form of :func:`_step_together` for searches written as functions of a
-    criterion (any SciPy minimiser), at the cost of a thread per task;
-    :func:`gcv_fit_many` steps generators instead.
-
-    Each task runs in its own thread and calls its criterion with one point at a
-    time; a round starts when every unfinished task waits for a value, and
-    evaluates all their points in one call to ``evaluate``.
-    """
-    if len(tasks) == 1:  # nothing to run side by side
-        ((k, task),) = tasks.items()
-        return {k: task(lambda log_p: evaluate({k: float(log_p)})[k])}
-    cond = threading.Condition()
-    pending: dict[int, float] = {}
-    answers: dict[int, float] = {}
-    ready = {k: threading.Event() for k in tasks}
-    active = set(tasks)
-    results: dict[int, float] = {}
-    errors: list[BaseException] = []
-    aborted = threading.Event()
-
-    def criterion_of(k: int) -> Callable[[float], float]:
-        def criterion(log_p: float) -> float:
-            with cond:
-                pending[k] = float(log_p)
-                if len(pending) >= len(active):
-                    cond.notify()
-            ready[k].wait()
-            ready[k].clear()
-            if aborted.is_set():
-                raise _Aborted
-            return answers.pop(k)
-
-        return criterion
-
-    def run(k: int) -> None:
-        try:
-            results[k] = tasks[k](criterion_of(k))
-        except _Aborted:
-            pass
-        except BaseException as exc:  # handed to the caller below
-            errors.append(exc)
-        finally:
-            with cond:
-                active.discard(k)
-                cond.notify()
-
-    threads = [threading.Thread(target=run, args=(k,), daemon=True) for k in tasks]
-    for thread in threads:
-        thread.start()
-    try:
-        while True:
-            with cond:
-                while active and len(pending) < len(active):
-                    cond.wait()
-                if not active:
-                    break
-                batch = dict(pending)
-                pending.clear()
-            answers.update(evaluate(batch))
-            for k in batch:
-                ready[k].set()
-    except BaseException:
-        aborted.set()  # every waiting task stops at its next criterion call
-        for event in ready.values():
-            event.set()
-        raise
-    finally:
-        for thread in threads:
-            thread.join()
-    if errors:
-        raise errors[0]
     return results
 
 

@@ -136,37 +136,3 @@ def test_smooth_trial_of_a_real_walking_trial_equals_per_coordinate_fits(
     # smoothing moves a 60 Hz lab trajectory by well under a centimetre
     moved = np.abs(got - coords)[np.isfinite(coords)]
     assert 0.0 < np.median(moved) < 5.0
-
-
-def test_lockstep_runs_each_task_on_batched_values_and_stops_on_errors() -> None:
-    import threading
-
-    from scipy import optimize
-
-    from spotlab.kinematics import gcv_batch
-
-    rounds: list[int] = []
-
-    def evaluate(points: dict[int, float]) -> dict[int, float]:
-        rounds.append(len(points))
-        return {k: (x - k) ** 2 for k, x in points.items()}
-
-    def task(criterion):  # type: ignore[no-untyped-def]
-        res = optimize.minimize_scalar(criterion, bounds=(-1.0, 9.0), method="bounded")
-        return float(res.x)
-
-    before = threading.active_count()
-    found = gcv_batch._lockstep(dict.fromkeys(range(6), task), evaluate)
-    assert all(abs(found[k] - k) < 1e-4 for k in range(6))
-    assert max(rounds) == 6 and len(rounds) < 40  # every round batched all six tasks
-
-    def failing(points: dict[int, float]) -> dict[int, float]:
-        if len(rounds) > 50:
-            raise MemoryError("no room")
-        rounds.append(len(points))
-        return {k: 1.0 for k in points}
-
-    rounds.extend([0] * 48)
-    with pytest.raises(MemoryError, match="no room"):
-        gcv_batch._lockstep(dict.fromkeys(range(4), task), failing)
-    assert threading.active_count() == before  # no task left waiting
