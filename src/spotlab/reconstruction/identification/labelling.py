@@ -170,12 +170,17 @@ def assign_labels(
     point_of = np.full(len(model.labels), -1, dtype=np.intp)
     point_of[out[out >= 0]] = np.flatnonzero(out >= 0)
     pending = list(range(len(model.segments)))
+    # A segment's best assignment depends only on its own markers' points and on the
+    # free points near it: it is kept until another segment takes one of those.
+    known: dict[int, tuple[tuple[float, IntArray] | None, IntArray]] = {}
     while pending:
         best: tuple[float, int, IntArray] | None = None
         for s in pending:
-            found = _segment_labels(
-                model, s, points, out, point_of, tol_mm, margin_mm, near_mm, anchors
-            )
+            if s not in known:
+                known[s] = _segment_labels(
+                    model, s, points, out, point_of, tol_mm, margin_mm, near_mm, anchors
+                )
+            found = known[s][0]
             if found is None:
                 continue
             rms, rows = found
@@ -185,11 +190,16 @@ def assign_labels(
             break
         _, s, rows = best
         seg = model.segments[s]
+        taken = []
         for p, k in enumerate(rows):
             if k >= 0 and out[k] < 0:
                 out[k] = seg.markers[p]
                 point_of[seg.markers[p]] = k
+                taken.append(k)
         pending.remove(s)
+        for other in pending:
+            if other in known and np.isin(known[other][1], taken).any():
+                del known[other]
     for _ in range(3):  # labels found by links constrain the next markers
         if not _linked_labels(model, points, out, point_of, tol_mm, min_links):
             break
@@ -210,13 +220,11 @@ def _link_fit(
     """Which ``candidates`` (points) fit ``marker`` by its links to labelled markers
     (all within range, ``tol_mm`` beyond, at least ``min_links`` of them), and how far
     each sits from the middle of its ranges (RMS over the links, in half-widths)."""
-    i, j, lo, hi = model.intervals
-    sel = (i == marker) | (j == marker)
-    partner = np.where(i[sel] == marker, j[sel], i[sel])
+    partner, lo, hi = model.partners[marker]
     have = point_of[partner] >= 0
     if have.sum() < min_links:
         return np.zeros(candidates.size, dtype=bool), np.full(candidates.size, np.inf)
-    lo_, hi_ = lo[sel][have], hi[sel][have]
+    lo_, hi_ = lo[have], hi[have]
     d = np.linalg.norm(points[candidates][:, None] - points[point_of[partner[have]]][None], axis=2)
     ok = ((d >= lo_ - tol_mm) & (d <= hi_ + tol_mm)).all(axis=1)
     half = np.maximum(0.5 * (hi_ - lo_), tol_mm)
@@ -254,10 +262,13 @@ def _exchanged_labels(
         p = int(point_of[m])
         point_of[m] = -1  # judged without its own label
         q_ok, q_off = _link_fit(model, points, point_of, int(m), free, tol_mm, min_links)
+        if q_ok.sum() != 1:
+            point_of[m] = p
+            continue
         here = np.array([p], dtype=np.intp)
         _, p_off = _link_fit(model, points, point_of, int(m), here, tol_mm, min_links)
         point_of[m] = p
-        if q_ok.sum() != 1 or not q_off[q_ok][0] < p_off[0]:
+        if not q_off[q_ok][0] < p_off[0]:
             continue
         q = int(free[q_ok][0])
         point_of[m] = -1
@@ -334,15 +345,30 @@ def _segment_labels(
     margin_mm: float,
     near_mm: float,
     anchors: FloatArray | None,
-) -> tuple[float, IntArray] | None:
-    """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None."""
+) -> tuple[tuple[float, IntArray] | None, IntArray]:
+    """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None;
+    with the free points it was chosen among (none when all its markers have points)."""
     seg = model.segments[s]
     fixed = point_of[list(seg.markers)]
+    free = np.zeros(0, dtype=np.intp)
     if (fixed >= 0).all():
-        return None
+        return None, free
     free = np.flatnonzero(labels < 0)
     if anchors is not None and np.isfinite(anchors[s]).all():
         free = free[np.linalg.norm(points[free] - anchors[s], axis=1) < near_mm]
+    return _segment_choice(seg, points, fixed, free, tol_mm, margin_mm), free
+
+
+def _segment_choice(
+    seg: Segment,
+    points: FloatArray,
+    fixed: IntArray,
+    free: IntArray,
+    tol_mm: float,
+    margin_mm: float,
+) -> tuple[float, IntArray] | None:
+    """:func:`_segment_labels` among the points ``free``, with ``fixed`` (point per marker
+    or -1)."""
     if free.size == 0:
         return None
     predicted = _predicted(seg, points, fixed)
