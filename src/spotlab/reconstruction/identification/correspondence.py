@@ -79,7 +79,7 @@ def _epipolar_pairs(
     geom: RigGeometry, xy: FloatArray, cam: IntArray, gate_px: float
 ) -> tuple[IntArray, IntArray, FloatArray]:
     """Blob pairs of different cameras within ``gate_px`` of each other's epipolar line."""
-    a, b = np.triu_indices(cam.size, 1)
+    a, b = geom.pairs(cam.size)
     other = cam[a] != cam[b]
     a, b = a[other], b[other]
     h = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
@@ -141,6 +141,8 @@ def match_blobs(
     if np.unique(cam).size < min_cameras:
         return empty
     a, b, dist = _epipolar_pairs(geom, xy, cam, gate_px)
+    if a.size == 0:
+        return empty
     X = _midpoints(geom, xy, cam, a, b)
     ok = np.isfinite(X[:, 0])
     a, b, dist, X = a[ok], b[ok], dist[ok], X[ok]

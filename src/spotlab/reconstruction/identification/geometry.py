@@ -85,8 +85,21 @@ class RigGeometry:
                     t_ij = self.t[j] - R_ij @ self.t[i]
                     self.E[i, j] = _cross_matrix(t_ij) @ R_ij
 
+        self._pairs: dict[int, tuple[NDArray[np.intp], NDArray[np.intp]]] = {}
+
     def __len__(self) -> int:
         return int(self.R.shape[0])
+
+    def pairs(self, n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every pair ``a < b`` of ``n`` items (:func:`numpy.triu_indices`), kept per ``n``
+        (read-only arrays)."""
+        found = self._pairs.get(n)
+        if found is None:
+            a, b = np.triu_indices(n, 1)
+            a.flags.writeable = False
+            b.flags.writeable = False
+            found = self._pairs[n] = (a, b)
+        return found
 
     def normalize(
         self, uv: FloatArray, camera: NDArray[np.intp]

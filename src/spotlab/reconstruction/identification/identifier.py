@@ -324,14 +324,17 @@ class Identifier:
     def _update_anchors(self) -> None:
         tracks = self.tracks
         lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
-        lab = lab[self._segment_of[tracks.label[lab]] >= 0]
         seg = self._segment_of[tracks.label[lab]]
+        lab, seg = lab[seg >= 0], seg[seg >= 0]
         S = self._anchors.shape[0]
         n = np.bincount(seg, minlength=S)
-        for axis in range(3):
-            total = np.bincount(seg, weights=tracks.position[lab, axis], minlength=S)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                self._anchors[:, axis] = np.where(n > 0, total / n, self._anchors[:, axis])
+        position = tracks.position[lab]
+        total = np.stack(
+            [np.bincount(seg, weights=position[:, axis], minlength=S) for axis in range(3)],
+            axis=1,
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self._anchors = np.where((n > 0)[:, None], total / n[:, None], self._anchors)
 
     def _check_calibration(
         self, camera: IntArray, usable: NDArray[np.bool_], used: NDArray[np.bool_]

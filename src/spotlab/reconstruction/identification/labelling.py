@@ -83,9 +83,21 @@ def _tree(
     keeps the largest assignments, not every subset of them (2^P rows for P markers).
     """
     model = seg.coordinates
+    # Work on the few points the tree can use (local indices), their distances once.
+    have = np.flatnonzero(fixed >= 0)
+    local = np.concatenate([fixed[have], free]).astype(np.intp)
+    fixed_local = np.full(fixed.size, -1, dtype=np.intp)
+    fixed_local[have] = np.arange(have.size)
+    free_local = np.arange(have.size, local.size)
+    X = points[local]
+    dist = np.linalg.norm(X[:, None] - X[None], axis=2)
+    other = ~np.eye(local.size, dtype=bool)  # a point is one marker at most
     rows = np.zeros((1, 0), dtype=np.intp)
     for p in range(model.shape[0]):
-        options = np.array([fixed[p]]) if fixed[p] >= 0 else np.concatenate([free, [-1]])
+        if fixed[p] >= 0:
+            options = np.array([fixed_local[p]])
+        else:
+            options = np.concatenate([free_local, [-1]])
         n = rows.shape[0]
         parent = np.repeat(np.arange(n), options.size)
         rows = np.hstack([rows[parent], np.tile(options, n)[:, None]])
@@ -94,15 +106,14 @@ def _tree(
         for q in range(p):
             old = rows[:, q]
             both = (old >= 0) & (new >= 0)
-            dist = np.linalg.norm(points[np.maximum(old, 0)] - points[np.maximum(new, 0)], axis=1)
             d_model = float(np.linalg.norm(model[p] - model[q]))
-            ok &= ~both | (np.abs(dist - d_model) <= tol_mm)
-            ok &= ~both | (old != new)
+            fits = (np.abs(dist - d_model) <= tol_mm) & other
+            ok &= ~both | fits[np.maximum(old, 0), np.maximum(new, 0)]
         placed = (rows[:, :p] >= 0).sum(axis=1) >= 2
         fitted = np.bincount(parent[ok & (new >= 0)], minlength=n) > 0
         ok &= ~((new < 0) & placed & fitted[parent])
         rows = rows[ok]
-    return rows
+    return np.where(rows >= 0, local[np.maximum(rows, 0)], -1)
 
 
 def _predicted(seg: Segment, points: FloatArray, fixed: IntArray) -> FloatArray | None:
@@ -232,6 +243,28 @@ def _link_fit(
     return ok, off
 
 
+def _fit_counts(
+    model: MarkerModel,
+    points: FloatArray,
+    point_of: IntArray,
+    free: IntArray,
+    tol_mm: float,
+    min_links: int,
+) -> IntArray:
+    """For every marker, how many of the ``free`` points fit it by its ranges to the
+    labelled markers, as :func:`_link_fit` judges (its own label left aside), shape (M,)."""
+    M = point_of.size
+    m_all, n_all, lo, hi = model.directed
+    use = point_of[n_all] >= 0
+    m_c, n_c = m_all[use], n_all[use]
+    d = np.linalg.norm(points[free][:, None] - points[point_of[n_c]][None], axis=2)  # (P, L)
+    ok = (d >= lo[use] - tol_mm) & (d <= hi[use] + tol_mm)
+    cell = (np.arange(free.size)[:, None] * M + m_c[None]).ravel()
+    bad = np.bincount(cell[~ok.ravel()], minlength=free.size * M).reshape(free.size, M)
+    fits = (bad == 0) & (np.bincount(m_c, minlength=M) >= min_links)[None]
+    return np.asarray(fits.sum(axis=0), dtype=np.intp)
+
+
 def _exchanged_labels(
     model: MarkerModel,
     points: FloatArray,
@@ -254,7 +287,15 @@ def _exchanged_labels(
     """
     owner = model.segment_of
     changed = False
-    for m in np.flatnonzero((point_of >= 0) & (owner < 0)):
+    markers = np.flatnonzero((point_of >= 0) & (owner < 0))
+    free = np.flatnonzero(labels < 0)
+    if free.size == 0 or not (point_of < 0).any():
+        return False
+    # Until a label is exchanged, the free points fitting each marker: one pass for all.
+    n_fit = _fit_counts(model, points, point_of, free, tol_mm, min_links)
+    for m in markers:
+        if not changed and n_fit[m] != 1:
+            continue
         free = np.flatnonzero(labels < 0)
         missing = np.flatnonzero(point_of < 0)
         if free.size == 0 or missing.size == 0:
@@ -312,11 +353,8 @@ def _linked_labels(
     missing = np.flatnonzero(point_of < 0)
     if free.size == 0 or missing.size == 0:
         return False
-    i, j, lo, hi = model.intervals
     # constraints of each missing marker m: a labelled partner n with its range
-    m_all = np.concatenate([i, j])
-    n_all = np.concatenate([j, i])
-    lo2, hi2 = np.concatenate([lo, lo]), np.concatenate([hi, hi])
+    m_all, n_all, lo2, hi2 = model.directed
     use = (point_of[m_all] < 0) & (point_of[n_all] >= 0)
     if not use.any():
         return False

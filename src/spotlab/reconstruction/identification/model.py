@@ -180,6 +180,18 @@ class MarkerModel:
             out.append((np.where(i[sel] == m, j[sel], i[sel]), lo[sel], hi[sel]))
         return tuple(out)
 
+    @cached_property
+    def directed(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+        """:attr:`intervals` both ways round ``(marker, partner, min mm, max mm)``: every
+        pair as ``(i, j)``, then every pair as ``(j, i)``."""
+        i, j, lo, hi = self.intervals
+        return (
+            np.concatenate([i, j]),
+            np.concatenate([j, i]),
+            np.concatenate([lo, lo]),
+            np.concatenate([hi, hi]),
+        )
+
     def pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
         """Marker pairs of the same segment ``(i, j, distance mm)``, each once."""
         i_all: list[IntArray] = [np.zeros(0, np.intp)]

@@ -143,12 +143,19 @@ def associate(
         return index, near
     proj = geom.project(predicted)  # (C, K, 2)
     slot, width = camera_slots(camera, C)
-    table = np.full((C, width, 2), np.nan)  # blobs camera by camera, NaN padded
-    table[camera, slot] = xy
+    table_x = np.full((C, width), np.nan)  # blobs camera by camera, NaN padded
+    table_y = np.full((C, width), np.nan)
+    table_x[camera, slot] = xy[:, 0]
+    table_y[camera, slot] = xy[:, 1]
     blob = np.full((C, width), -1, dtype=np.intp)
     blob[camera, slot] = np.arange(camera.size)
-    diff = proj[:, :, None, :] - table[:, None, :, :]  # (C, K, W, 2)
-    d = np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2) * geom.f[:, None, None]
+    dx = proj[:, :, 0, None] - table_x[:, None, :]  # (C, K, W)
+    dy = proj[:, :, 1, None] - table_y[:, None, :]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    d = np.sqrt(dx, out=dx)
+    d *= geom.f[:, None, None]
     with np.errstate(invalid="ignore"):
         inside = d < gate_px[None, :, None]  # NaN (padding, behind a camera) never inside
     hit = inside.any(axis=1)  # (C, W)
