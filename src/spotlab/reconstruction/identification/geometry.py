@@ -102,7 +102,10 @@ class RigGeometry:
         return found
 
     def normalize(
-        self, uv: FloatArray, camera: NDArray[np.intp]
+        self,
+        uv: FloatArray,
+        camera: NDArray[np.intp],
+        slots: tuple[NDArray[np.intp], int] | None = None,
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Ideal normalised coordinates of stacked blobs.
 
@@ -111,6 +114,8 @@ class RigGeometry:
         uv : ndarray, shape (N, 2)
             Distorted pixels.
         camera : ndarray of int, shape (N,)
+        slots : (ndarray of int, int), optional
+            ``camera_slots(camera, C)`` when the caller has it.
 
         Returns
         -------
@@ -120,7 +125,7 @@ class RigGeometry:
             calibrated image).
         """
         C = len(self)
-        slot, width = camera_slots(camera, C)
+        slot, width = camera_slots(camera, C) if slots is None else slots
         padded = np.full((C, width, 2), np.nan)
         padded[camera, slot] = uv
         x, y, seen = self.triangulator.normalize(padded)

@@ -28,7 +28,7 @@ from spotlab.core.errors import CalibrationError, ReconstructionError
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
-from spotlab.reconstruction.identification.geometry import RigGeometry
+from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
 from spotlab.reconstruction.identification.tracking import Tracks, associate
@@ -182,11 +182,12 @@ class Identifier:
             flags |= np.where(np.asarray(unusable, dtype=bool).reshape(C), UNUSABLE, 0)
         keep = (flags & (FLOODED | UNUSABLE))[frame.camera] == 0
         camera = frame.camera[keep]
-        xy, ok = self.geom.normalize(frame.uv[keep], camera)
+        slots = camera_slots(camera, C)
+        xy, ok = self.geom.normalize(frame.uv[keep], camera, slots)
         usable = ok & ~frame.merged[keep]
         tracks = self.tracks
         gate = np.asarray(self.gate_px * (1.0 + tracks.missed), dtype=np.float64)
-        index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable)
+        index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable, slots)
         seen = index >= 0
         if xy.shape[0]:
             rays = np.where(seen[..., None], xy[np.maximum(index, 0)], 0.0)

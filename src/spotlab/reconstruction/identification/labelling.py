@@ -36,6 +36,13 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 
+def _length(v: FloatArray) -> FloatArray:
+    """Euclidean lengths of vectors (..., 3), summed in the order of
+    :func:`numpy.linalg.norm` (``(x^2 + y^2) + z^2``) without its overhead."""
+    s = v * v
+    return np.asarray(np.sqrt((s[..., 0] + s[..., 1]) + s[..., 2]))
+
+
 def inconsistent_labels(
     model: MarkerModel, points: FloatArray, age: IntArray, tol_mm: float
 ) -> NDArray[np.bool_]:
@@ -58,7 +65,7 @@ def inconsistent_labels(
         True for labels to drop.
     """
     i, j, lo, hi = model.intervals
-    dist = np.linalg.norm(points[i] - points[j], axis=1)
+    dist = _length(points[i] - points[j])
     err = np.maximum(np.maximum(lo - dist, dist - hi), 0.0)  # NaN where one is missing
     both = np.isfinite(err)
     bad = both & (err > tol_mm)
@@ -90,7 +97,7 @@ def _tree(
     fixed_local[have] = np.arange(have.size)
     free_local = np.arange(have.size, local.size)
     X = points[local]
-    dist = np.linalg.norm(X[:, None] - X[None], axis=2)
+    dist = _length(X[:, None] - X[None])
     other = ~np.eye(local.size, dtype=bool)  # a point is one marker at most
     rows = np.zeros((1, 0), dtype=np.intp)
     for p in range(model.shape[0]):
@@ -236,7 +243,7 @@ def _link_fit(
     if have.sum() < min_links:
         return np.zeros(candidates.size, dtype=bool), np.full(candidates.size, np.inf)
     lo_, hi_ = lo[have], hi[have]
-    d = np.linalg.norm(points[candidates][:, None] - points[point_of[partner[have]]][None], axis=2)
+    d = _length(points[candidates][:, None] - points[point_of[partner[have]]][None])
     ok = ((d >= lo_ - tol_mm) & (d <= hi_ + tol_mm)).all(axis=1)
     half = np.maximum(0.5 * (hi_ - lo_), tol_mm)
     off = np.sqrt(np.mean(((d - 0.5 * (lo_ + hi_)) / half) ** 2, axis=1))
@@ -257,7 +264,7 @@ def _fit_counts(
     m_all, n_all, lo, hi = model.directed
     use = point_of[n_all] >= 0
     m_c, n_c = m_all[use], n_all[use]
-    d = np.linalg.norm(points[free][:, None] - points[point_of[n_c]][None], axis=2)  # (P, L)
+    d = _length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
     ok = (d >= lo[use] - tol_mm) & (d <= hi[use] + tol_mm)
     cell = (np.arange(free.size)[:, None] * M + m_c[None]).ravel()
     bad = np.bincount(cell[~ok.ravel()], minlength=free.size * M).reshape(free.size, M)
@@ -359,7 +366,7 @@ def _linked_labels(
     if not use.any():
         return False
     m_c, n_c, lo_c, hi_c = m_all[use], n_all[use], lo2[use], hi2[use]
-    dist = np.linalg.norm(points[free][:, None] - points[point_of[n_c]][None], axis=2)  # (P, L)
+    dist = _length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
     ok = (dist >= lo_c - tol_mm) & (dist <= hi_c + tol_mm)
     slot = np.searchsorted(missing, m_c)
     n_checks = np.bincount(slot, minlength=missing.size)

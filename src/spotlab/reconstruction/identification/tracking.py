@@ -113,6 +113,7 @@ def associate(
     xy: FloatArray,
     camera: IntArray,
     usable: NDArray[np.bool_],
+    slots: tuple[IntArray, int] | None = None,
 ) -> tuple[IntArray, NDArray[np.bool_]]:
     """Blobs for predicted points, camera by camera.
 
@@ -128,6 +129,8 @@ def associate(
     camera : ndarray of int, shape (N,)
     usable : ndarray of bool, shape (N,)
         Blobs that may be assigned (not merged, undistorted).
+    slots : (ndarray of int, int), optional
+        ``camera_slots(camera, C)`` when the caller has it.
 
     Returns
     -------
@@ -142,7 +145,7 @@ def associate(
     if K == 0 or camera.size == 0:
         return index, near
     proj = geom.project(predicted)  # (C, K, 2)
-    slot, width = camera_slots(camera, C)
+    slot, width = camera_slots(camera, C) if slots is None else slots
     table_x = np.full((C, width), np.nan)  # blobs camera by camera, NaN padded
     table_y = np.full((C, width), np.nan)
     table_x[camera, slot] = xy[:, 0]
