@@ -247,7 +247,7 @@ def _link_fit(
     ok = ((d >= lo_ - tol_mm) & (d <= hi_ + tol_mm)).all(axis=1)
     half = np.maximum(0.5 * (hi_ - lo_), tol_mm)
     off = np.sqrt(np.mean(((d - 0.5 * (lo_ + hi_)) / half) ** 2, axis=1))
-    return ok, off
+    return np.asarray(ok), off
 
 
 def _fit_counts(
