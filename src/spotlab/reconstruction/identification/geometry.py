@@ -65,6 +65,8 @@ class RigGeometry:
     E : ndarray, shape (C, C, 3, 3)
         Essential matrices: ``[x_j, 1] E[i, j] [x_i, 1]' = 0`` for the images of one
         point in cameras ``i`` and ``j``.
+    E_flat : ndarray, shape (C * C, 3, 3)
+        ``E`` with the camera pair ``(i, j)`` at row ``i * C + j`` (a faster gather).
     centers : ndarray, shape (C, 3)
         Perspective centres (mm).
     """
@@ -85,6 +87,7 @@ class RigGeometry:
                     t_ij = self.t[j] - R_ij @ self.t[i]
                     self.E[i, j] = _cross_matrix(t_ij) @ R_ij
 
+        self.E_flat = self.E.reshape(C * C, 3, 3)  # E[i, j] is E_flat[i * C + j]
         self._pairs: dict[int, tuple[NDArray[np.intp], NDArray[np.intp]]] = {}
 
     def __len__(self) -> int:
@@ -146,10 +149,13 @@ class RigGeometry:
         ndarray, shape (C, N, 2)
             NaN behind a camera or for NaN points.
         """
-        Xc = np.einsum("cij,nj->cni", self.R, X) + self.t[:, None, :]
+        Xc = np.einsum("cij,nj->cni", self.R, X)
+        Xc += self.t[:, None, :]
         z = Xc[..., 2:3]
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(z > 0.0, Xc[..., :2] / z, np.nan)
+            out = Xc[..., :2] / z
+            out[~(z[..., 0] > 0.0)] = np.nan
+        return np.asarray(out)
 
     def triangulate(
         self, xy: FloatArray, seen: NDArray[np.bool_], *, max_ray_px: float, min_views: int = 2
