@@ -176,9 +176,10 @@ def associate(
     contested = (per_track > 0) & ~single
     for c in np.flatnonzero(contested.any(axis=1)):
         rows = np.flatnonzero(contested[c])
-        cols = np.flatnonzero(inside[c, rows].any(axis=0))
-        sub = inside[c][np.ix_(rows, cols)]
-        cost = np.where(sub, d[c][np.ix_(rows, cols)], 1e6)
+        in_rows = inside[c, rows]
+        cols = np.flatnonzero(in_rows.any(axis=0))
+        sub = in_rows[:, cols]
+        cost = np.where(sub, d[c, rows][:, cols], 1e6)
         r, k = linear_sum_assignment(cost)
         ok = sub[r, k]
         index[c, rows[r[ok]]] = blob[c, cols[k[ok]]]
