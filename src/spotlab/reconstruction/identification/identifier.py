@@ -146,6 +146,7 @@ class Identifier:
         C, S = len(rig), len(model.segments)
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
+        _ = model.partners, model.directed  # the model's lookup tables, built before frames
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
