@@ -79,20 +79,40 @@ def _epipolar_pairs(
     geom: RigGeometry, xy: FloatArray, cam: IntArray, gate_px: float
 ) -> tuple[IntArray, IntArray, FloatArray]:
     """Blob pairs of different cameras within ``gate_px`` of each other's epipolar line."""
-    a, b = np.triu_indices(cam.size, 1)
+    a, b = geom.pairs(cam.size)
     other = cam[a] != cam[b]
     a, b = a[other], b[other]
     h = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
-    E = geom.E[cam[a], cam[b]]  # (P, 3, 3): h_b' E h_a = 0
+    ca, cb = cam[a], cam[b]
+    E = geom.E_flat[ca * len(geom) + cb]  # (P, 3, 3): h_b' E h_a = 0
     line_b = np.einsum("pij,pj->pi", E, h[a])
     line_a = np.einsum("pij,pi->pj", E, h[b])
     algebraic = np.abs((line_b * h[b]).sum(1))
+    fa, fb = geom.f[ca], geom.f[cb]
+    # The exact distances (hypot, slow) only for pairs a rough test with a 1 % margin
+    # does not put outside the gate in both images.
+    rough = _maybe_within(algebraic * fb, line_b, gate_px) & _maybe_within(
+        algebraic * fa, line_a, gate_px
+    )
+    idx = np.flatnonzero(rough)
+    algebraic, line_a, line_b = algebraic[idx], line_a[idx], line_b[idx]
     with np.errstate(divide="ignore", invalid="ignore"):
-        dist_b = algebraic / np.hypot(line_b[:, 0], line_b[:, 1]) * geom.f[cam[b]]
-        dist_a = algebraic / np.hypot(line_a[:, 0], line_a[:, 1]) * geom.f[cam[a]]
+        dist_b = algebraic / np.hypot(line_b[:, 0], line_b[:, 1]) * fb[idx]
+        dist_a = algebraic / np.hypot(line_a[:, 0], line_a[:, 1]) * fa[idx]
     dist = np.maximum(dist_a, dist_b)
     keep = dist < gate_px
-    return a[keep], b[keep], dist[keep]
+    return a[idx[keep]], b[idx[keep]], dist[keep]
+
+
+def _maybe_within(scaled: FloatArray, line: FloatArray, gate_px: float) -> NDArray[np.bool_]:
+    """False only where ``scaled / |line[:, :2]|`` is surely at or beyond ``gate_px``
+    (1 % margin; NaN, overflow or vanishing lines stay True)."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        n2 = line[:, 0] * line[:, 0] + line[:, 1] * line[:, 1]
+        lhs = scaled * scaled
+        rhs = (1.01 * gate_px) ** 2 * n2
+        outside = (lhs >= rhs) & np.isfinite(lhs) & np.isfinite(rhs) & (n2 > 1e-200)
+    return np.asarray(~outside)
 
 
 def match_blobs(
@@ -141,18 +161,28 @@ def match_blobs(
     if np.unique(cam).size < min_cameras:
         return empty
     a, b, dist = _epipolar_pairs(geom, xy, cam, gate_px)
+    if a.size == 0:
+        return empty
     X = _midpoints(geom, xy, cam, a, b)
     ok = np.isfinite(X[:, 0])
     a, b, dist, X = a[ok], b[ok], dist[ok], X[ok]
     if a.size == 0:
         return empty
     proj = geom.project(X)  # (C, S, 2)
-    diff = proj[cam].transpose(1, 0, 2) - xy[None]  # (S, N, 2)
-    d = np.hypot(diff[..., 0], diff[..., 1]) * geom.f[cam]
+    f = geom.f[cam]
+    dx = proj[:, :, 0][cam].T - xy[:, 0]  # (S, N)
+    dy = proj[:, :, 1][cam].T - xy[:, 1]
+    # The exact distance (hypot, slow) only where a rough one, with a 1 % margin, is
+    # within the gate: every blob near a seed passes the rough test; far ones stay inf.
+    with np.errstate(invalid="ignore"):
+        s_i, n_i = np.nonzero((dx * dx + dy * dy) * (f * f) < (1.01 * gate_px) ** 2)
+    d = np.full(dx.shape, np.inf)
+    d[s_i, n_i] = np.hypot(dx[s_i, n_i], dy[s_i, n_i]) * f[n_i]
     near = d < gate_px
-    onehot = np.zeros((cam.size, C), dtype=np.float64)
-    onehot[np.arange(cam.size), cam] = 1.0
-    support = ((near.astype(np.float64) @ onehot) > 0).sum(axis=1)
+    close = near[s_i, n_i]
+    seen_by = np.zeros((X.shape[0], C), dtype=bool)  # (S, C): a near blob in camera c
+    seen_by[s_i[close], cam[n_i[close]]] = True
+    support = seen_by.sum(axis=1)
     order = np.lexsort((dist, -support))
     order = order[support[order] >= min_cameras]
     used = np.zeros(cam.size, dtype=bool)

@@ -65,6 +65,8 @@ class RigGeometry:
     E : ndarray, shape (C, C, 3, 3)
         Essential matrices: ``[x_j, 1] E[i, j] [x_i, 1]' = 0`` for the images of one
         point in cameras ``i`` and ``j``.
+    E_flat : ndarray, shape (C * C, 3, 3)
+        ``E`` with the camera pair ``(i, j)`` at row ``i * C + j`` (a faster gather).
     centers : ndarray, shape (C, 3)
         Perspective centres (mm).
     """
@@ -85,11 +87,28 @@ class RigGeometry:
                     t_ij = self.t[j] - R_ij @ self.t[i]
                     self.E[i, j] = _cross_matrix(t_ij) @ R_ij
 
+        self.E_flat = self.E.reshape(C * C, 3, 3)  # E[i, j] is E_flat[i * C + j]
+        self._pairs: dict[int, tuple[NDArray[np.intp], NDArray[np.intp]]] = {}
+
     def __len__(self) -> int:
         return int(self.R.shape[0])
 
+    def pairs(self, n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every pair ``a < b`` of ``n`` items (:func:`numpy.triu_indices`), kept per ``n``
+        (read-only arrays)."""
+        found = self._pairs.get(n)
+        if found is None:
+            a, b = np.triu_indices(n, 1)
+            a.flags.writeable = False
+            b.flags.writeable = False
+            found = self._pairs[n] = (a, b)
+        return found
+
     def normalize(
-        self, uv: FloatArray, camera: NDArray[np.intp]
+        self,
+        uv: FloatArray,
+        camera: NDArray[np.intp],
+        slots: tuple[NDArray[np.intp], int] | None = None,
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Ideal normalised coordinates of stacked blobs.
 
@@ -98,6 +117,8 @@ class RigGeometry:
         uv : ndarray, shape (N, 2)
             Distorted pixels.
         camera : ndarray of int, shape (N,)
+        slots : (ndarray of int, int), optional
+            ``camera_slots(camera, C)`` when the caller has it.
 
         Returns
         -------
@@ -107,7 +128,7 @@ class RigGeometry:
             calibrated image).
         """
         C = len(self)
-        slot, width = camera_slots(camera, C)
+        slot, width = camera_slots(camera, C) if slots is None else slots
         padded = np.full((C, width, 2), np.nan)
         padded[camera, slot] = uv
         x, y, seen = self.triangulator.normalize(padded)
@@ -128,10 +149,13 @@ class RigGeometry:
         ndarray, shape (C, N, 2)
             NaN behind a camera or for NaN points.
         """
-        Xc = np.einsum("cij,nj->cni", self.R, X) + self.t[:, None, :]
+        Xc = np.einsum("cij,nj->cni", self.R, X)
+        Xc += self.t[:, None, :]
         z = Xc[..., 2:3]
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(z > 0.0, Xc[..., :2] / z, np.nan)
+            out = Xc[..., :2] / z
+            out[~(z[..., 0] > 0.0)] = np.nan
+        return np.asarray(out)
 
     def triangulate(
         self, xy: FloatArray, seen: NDArray[np.bool_], *, max_ray_px: float, min_views: int = 2

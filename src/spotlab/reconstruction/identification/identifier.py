@@ -28,7 +28,7 @@ from spotlab.core.errors import CalibrationError, ReconstructionError
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
-from spotlab.reconstruction.identification.geometry import RigGeometry
+from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
 from spotlab.reconstruction.identification.tracking import Tracks, associate
@@ -146,6 +146,7 @@ class Identifier:
         C, S = len(rig), len(model.segments)
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
+        _ = model.partners, model.directed  # the model's lookup tables, built before frames
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -182,11 +183,12 @@ class Identifier:
             flags |= np.where(np.asarray(unusable, dtype=bool).reshape(C), UNUSABLE, 0)
         keep = (flags & (FLOODED | UNUSABLE))[frame.camera] == 0
         camera = frame.camera[keep]
-        xy, ok = self.geom.normalize(frame.uv[keep], camera)
+        slots = camera_slots(camera, C)
+        xy, ok = self.geom.normalize(frame.uv[keep], camera, slots)
         usable = ok & ~frame.merged[keep]
         tracks = self.tracks
         gate = np.asarray(self.gate_px * (1.0 + tracks.missed), dtype=np.float64)
-        index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable)
+        index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable, slots)
         seen = index >= 0
         if xy.shape[0]:
             rays = np.where(seen[..., None], xy[np.maximum(index, 0)], 0.0)
@@ -324,14 +326,17 @@ class Identifier:
     def _update_anchors(self) -> None:
         tracks = self.tracks
         lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
-        lab = lab[self._segment_of[tracks.label[lab]] >= 0]
         seg = self._segment_of[tracks.label[lab]]
+        lab, seg = lab[seg >= 0], seg[seg >= 0]
         S = self._anchors.shape[0]
         n = np.bincount(seg, minlength=S)
-        for axis in range(3):
-            total = np.bincount(seg, weights=tracks.position[lab, axis], minlength=S)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                self._anchors[:, axis] = np.where(n > 0, total / n, self._anchors[:, axis])
+        position = tracks.position[lab]
+        total = np.stack(
+            [np.bincount(seg, weights=position[:, axis], minlength=S) for axis in range(3)],
+            axis=1,
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self._anchors = np.where((n > 0)[:, None], total / n[:, None], self._anchors)
 
     def _check_calibration(
         self, camera: IntArray, usable: NDArray[np.bool_], used: NDArray[np.bool_]

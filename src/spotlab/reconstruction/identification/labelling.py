@@ -36,6 +36,13 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 
+def _length(v: FloatArray) -> FloatArray:
+    """Euclidean lengths of vectors (..., 3), summed in the order of
+    :func:`numpy.linalg.norm` (``(x^2 + y^2) + z^2``) without its overhead."""
+    s = v * v
+    return np.asarray(np.sqrt((s[..., 0] + s[..., 1]) + s[..., 2]))
+
+
 def inconsistent_labels(
     model: MarkerModel, points: FloatArray, age: IntArray, tol_mm: float
 ) -> NDArray[np.bool_]:
@@ -58,7 +65,7 @@ def inconsistent_labels(
         True for labels to drop.
     """
     i, j, lo, hi = model.intervals
-    dist = np.linalg.norm(points[i] - points[j], axis=1)
+    dist = _length(points[i] - points[j])
     err = np.maximum(np.maximum(lo - dist, dist - hi), 0.0)  # NaN where one is missing
     both = np.isfinite(err)
     bad = both & (err > tol_mm)
@@ -83,9 +90,21 @@ def _tree(
     keeps the largest assignments, not every subset of them (2^P rows for P markers).
     """
     model = seg.coordinates
+    # Work on the few points the tree can use (local indices), their distances once.
+    have = np.flatnonzero(fixed >= 0)
+    local = np.concatenate([fixed[have], free]).astype(np.intp)
+    fixed_local = np.full(fixed.size, -1, dtype=np.intp)
+    fixed_local[have] = np.arange(have.size)
+    free_local = np.arange(have.size, local.size)
+    X = points[local]
+    dist = _length(X[:, None] - X[None])
+    other = ~np.eye(local.size, dtype=bool)  # a point is one marker at most
     rows = np.zeros((1, 0), dtype=np.intp)
     for p in range(model.shape[0]):
-        options = np.array([fixed[p]]) if fixed[p] >= 0 else np.concatenate([free, [-1]])
+        if fixed[p] >= 0:
+            options = np.array([fixed_local[p]])
+        else:
+            options = np.concatenate([free_local, [-1]])
         n = rows.shape[0]
         parent = np.repeat(np.arange(n), options.size)
         rows = np.hstack([rows[parent], np.tile(options, n)[:, None]])
@@ -94,15 +113,14 @@ def _tree(
         for q in range(p):
             old = rows[:, q]
             both = (old >= 0) & (new >= 0)
-            dist = np.linalg.norm(points[np.maximum(old, 0)] - points[np.maximum(new, 0)], axis=1)
             d_model = float(np.linalg.norm(model[p] - model[q]))
-            ok &= ~both | (np.abs(dist - d_model) <= tol_mm)
-            ok &= ~both | (old != new)
+            fits = (np.abs(dist - d_model) <= tol_mm) & other
+            ok &= ~both | fits[np.maximum(old, 0), np.maximum(new, 0)]
         placed = (rows[:, :p] >= 0).sum(axis=1) >= 2
         fitted = np.bincount(parent[ok & (new >= 0)], minlength=n) > 0
         ok &= ~((new < 0) & placed & fitted[parent])
         rows = rows[ok]
-    return rows
+    return np.where(rows >= 0, local[np.maximum(rows, 0)], -1)
 
 
 def _predicted(seg: Segment, points: FloatArray, fixed: IntArray) -> FloatArray | None:
@@ -170,12 +188,17 @@ def assign_labels(
     point_of = np.full(len(model.labels), -1, dtype=np.intp)
     point_of[out[out >= 0]] = np.flatnonzero(out >= 0)
     pending = list(range(len(model.segments)))
+    # A segment's best assignment depends only on its own markers' points and on the
+    # free points near it: it is kept until another segment takes one of those.
+    known: dict[int, tuple[tuple[float, IntArray] | None, IntArray]] = {}
     while pending:
         best: tuple[float, int, IntArray] | None = None
         for s in pending:
-            found = _segment_labels(
-                model, s, points, out, point_of, tol_mm, margin_mm, near_mm, anchors
-            )
+            if s not in known:
+                known[s] = _segment_labels(
+                    model, s, points, out, point_of, tol_mm, margin_mm, near_mm, anchors
+                )
+            found = known[s][0]
             if found is None:
                 continue
             rms, rows = found
@@ -185,11 +208,16 @@ def assign_labels(
             break
         _, s, rows = best
         seg = model.segments[s]
+        taken = []
         for p, k in enumerate(rows):
             if k >= 0 and out[k] < 0:
                 out[k] = seg.markers[p]
                 point_of[seg.markers[p]] = k
+                taken.append(k)
         pending.remove(s)
+        for other in pending:
+            if other in known and np.isin(known[other][1], taken).any():
+                del known[other]
     for _ in range(3):  # labels found by links constrain the next markers
         if not _linked_labels(model, points, out, point_of, tol_mm, min_links):
             break
@@ -210,18 +238,38 @@ def _link_fit(
     """Which ``candidates`` (points) fit ``marker`` by its links to labelled markers
     (all within range, ``tol_mm`` beyond, at least ``min_links`` of them), and how far
     each sits from the middle of its ranges (RMS over the links, in half-widths)."""
-    i, j, lo, hi = model.intervals
-    sel = (i == marker) | (j == marker)
-    partner = np.where(i[sel] == marker, j[sel], i[sel])
+    partner, lo, hi = model.partners[marker]
     have = point_of[partner] >= 0
     if have.sum() < min_links:
         return np.zeros(candidates.size, dtype=bool), np.full(candidates.size, np.inf)
-    lo_, hi_ = lo[sel][have], hi[sel][have]
-    d = np.linalg.norm(points[candidates][:, None] - points[point_of[partner[have]]][None], axis=2)
+    lo_, hi_ = lo[have], hi[have]
+    d = _length(points[candidates][:, None] - points[point_of[partner[have]]][None])
     ok = ((d >= lo_ - tol_mm) & (d <= hi_ + tol_mm)).all(axis=1)
     half = np.maximum(0.5 * (hi_ - lo_), tol_mm)
     off = np.sqrt(np.mean(((d - 0.5 * (lo_ + hi_)) / half) ** 2, axis=1))
-    return ok, off
+    return np.asarray(ok), off
+
+
+def _fit_counts(
+    model: MarkerModel,
+    points: FloatArray,
+    point_of: IntArray,
+    free: IntArray,
+    tol_mm: float,
+    min_links: int,
+) -> IntArray:
+    """For every marker, how many of the ``free`` points fit it by its ranges to the
+    labelled markers, as :func:`_link_fit` judges (its own label left aside), shape (M,)."""
+    M = point_of.size
+    m_all, n_all, lo, hi = model.directed
+    use = point_of[n_all] >= 0
+    m_c, n_c = m_all[use], n_all[use]
+    d = _length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
+    ok = (d >= lo[use] - tol_mm) & (d <= hi[use] + tol_mm)
+    cell = (np.arange(free.size)[:, None] * M + m_c[None]).ravel()
+    bad = np.bincount(cell[~ok.ravel()], minlength=free.size * M).reshape(free.size, M)
+    fits = (bad == 0) & (np.bincount(m_c, minlength=M) >= min_links)[None]
+    return np.asarray(fits.sum(axis=0), dtype=np.intp)
 
 
 def _exchanged_labels(
@@ -246,7 +294,15 @@ def _exchanged_labels(
     """
     owner = model.segment_of
     changed = False
-    for m in np.flatnonzero((point_of >= 0) & (owner < 0)):
+    markers = np.flatnonzero((point_of >= 0) & (owner < 0))
+    free = np.flatnonzero(labels < 0)
+    if free.size == 0 or not (point_of < 0).any():
+        return False
+    # Until a label is exchanged, the free points fitting each marker: one pass for all.
+    n_fit = _fit_counts(model, points, point_of, free, tol_mm, min_links)
+    for m in markers:
+        if not changed and n_fit[m] != 1:
+            continue
         free = np.flatnonzero(labels < 0)
         missing = np.flatnonzero(point_of < 0)
         if free.size == 0 or missing.size == 0:
@@ -254,10 +310,13 @@ def _exchanged_labels(
         p = int(point_of[m])
         point_of[m] = -1  # judged without its own label
         q_ok, q_off = _link_fit(model, points, point_of, int(m), free, tol_mm, min_links)
+        if q_ok.sum() != 1:
+            point_of[m] = p
+            continue
         here = np.array([p], dtype=np.intp)
         _, p_off = _link_fit(model, points, point_of, int(m), here, tol_mm, min_links)
         point_of[m] = p
-        if q_ok.sum() != 1 or not q_off[q_ok][0] < p_off[0]:
+        if not q_off[q_ok][0] < p_off[0]:
             continue
         q = int(free[q_ok][0])
         point_of[m] = -1
@@ -301,16 +360,13 @@ def _linked_labels(
     missing = np.flatnonzero(point_of < 0)
     if free.size == 0 or missing.size == 0:
         return False
-    i, j, lo, hi = model.intervals
     # constraints of each missing marker m: a labelled partner n with its range
-    m_all = np.concatenate([i, j])
-    n_all = np.concatenate([j, i])
-    lo2, hi2 = np.concatenate([lo, lo]), np.concatenate([hi, hi])
+    m_all, n_all, lo2, hi2 = model.directed
     use = (point_of[m_all] < 0) & (point_of[n_all] >= 0)
     if not use.any():
         return False
     m_c, n_c, lo_c, hi_c = m_all[use], n_all[use], lo2[use], hi2[use]
-    dist = np.linalg.norm(points[free][:, None] - points[point_of[n_c]][None], axis=2)  # (P, L)
+    dist = _length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
     ok = (dist >= lo_c - tol_mm) & (dist <= hi_c + tol_mm)
     slot = np.searchsorted(missing, m_c)
     n_checks = np.bincount(slot, minlength=missing.size)
@@ -334,15 +390,30 @@ def _segment_labels(
     margin_mm: float,
     near_mm: float,
     anchors: FloatArray | None,
-) -> tuple[float, IntArray] | None:
-    """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None."""
+) -> tuple[tuple[float, IntArray] | None, IntArray]:
+    """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None;
+    with the free points it was chosen among (none when all its markers have points)."""
     seg = model.segments[s]
     fixed = point_of[list(seg.markers)]
+    free = np.zeros(0, dtype=np.intp)
     if (fixed >= 0).all():
-        return None
+        return None, free
     free = np.flatnonzero(labels < 0)
     if anchors is not None and np.isfinite(anchors[s]).all():
         free = free[np.linalg.norm(points[free] - anchors[s], axis=1) < near_mm]
+    return _segment_choice(seg, points, fixed, free, tol_mm, margin_mm), free
+
+
+def _segment_choice(
+    seg: Segment,
+    points: FloatArray,
+    fixed: IntArray,
+    free: IntArray,
+    tol_mm: float,
+    margin_mm: float,
+) -> tuple[float, IntArray] | None:
+    """:func:`_segment_labels` among the points ``free``, with ``fixed`` (point per marker
+    or -1)."""
     if free.size == 0:
         return None
     predicted = _predicted(seg, points, fixed)

@@ -169,6 +169,29 @@ class MarkerModel:
             np.concatenate([d + w, hi]),
         )
 
+    @cached_property
+    def partners(self) -> tuple[tuple[IntArray, FloatArray, FloatArray], ...]:
+        """Per marker, its constrained partners ``(partner, min mm, max mm)`` in the order
+        of :attr:`intervals` (built once: labelling looks them up every frame)."""
+        i, j, lo, hi = self.intervals
+        out = []
+        for m in range(len(self.labels)):
+            sel = (i == m) | (j == m)
+            out.append((np.where(i[sel] == m, j[sel], i[sel]), lo[sel], hi[sel]))
+        return tuple(out)
+
+    @cached_property
+    def directed(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
+        """:attr:`intervals` both ways round ``(marker, partner, min mm, max mm)``: every
+        pair as ``(i, j)``, then every pair as ``(j, i)``."""
+        i, j, lo, hi = self.intervals
+        return (
+            np.concatenate([i, j]),
+            np.concatenate([j, i]),
+            np.concatenate([lo, lo]),
+            np.concatenate([hi, hi]),
+        )
+
     def pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
         """Marker pairs of the same segment ``(i, j, distance mm)``, each once."""
         i_all: list[IntArray] = [np.zeros(0, np.intp)]

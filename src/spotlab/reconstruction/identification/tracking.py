@@ -113,6 +113,7 @@ def associate(
     xy: FloatArray,
     camera: IntArray,
     usable: NDArray[np.bool_],
+    slots: tuple[IntArray, int] | None = None,
 ) -> tuple[IntArray, NDArray[np.bool_]]:
     """Blobs for predicted points, camera by camera.
 
@@ -128,6 +129,8 @@ def associate(
     camera : ndarray of int, shape (N,)
     usable : ndarray of bool, shape (N,)
         Blobs that may be assigned (not merged, undistorted).
+    slots : (ndarray of int, int), optional
+        ``camera_slots(camera, C)`` when the caller has it.
 
     Returns
     -------
@@ -142,13 +145,20 @@ def associate(
     if K == 0 or camera.size == 0:
         return index, near
     proj = geom.project(predicted)  # (C, K, 2)
-    slot, width = camera_slots(camera, C)
-    table = np.full((C, width, 2), np.nan)  # blobs camera by camera, NaN padded
-    table[camera, slot] = xy
+    slot, width = camera_slots(camera, C) if slots is None else slots
+    table_x = np.full((C, width), np.nan)  # blobs camera by camera, NaN padded
+    table_y = np.full((C, width), np.nan)
+    table_x[camera, slot] = xy[:, 0]
+    table_y[camera, slot] = xy[:, 1]
     blob = np.full((C, width), -1, dtype=np.intp)
     blob[camera, slot] = np.arange(camera.size)
-    diff = proj[:, :, None, :] - table[:, None, :, :]  # (C, K, W, 2)
-    d = np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2) * geom.f[:, None, None]
+    dx = proj[:, :, 0, None] - table_x[:, None, :]  # (C, K, W)
+    dy = proj[:, :, 1, None] - table_y[:, None, :]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    d = np.sqrt(dx, out=dx)
+    d *= geom.f[:, None, None]
     with np.errstate(invalid="ignore"):
         inside = d < gate_px[None, :, None]  # NaN (padding, behind a camera) never inside
     hit = inside.any(axis=1)  # (C, W)
@@ -166,9 +176,10 @@ def associate(
     contested = (per_track > 0) & ~single
     for c in np.flatnonzero(contested.any(axis=1)):
         rows = np.flatnonzero(contested[c])
-        cols = np.flatnonzero(inside[c, rows].any(axis=0))
-        sub = inside[c][np.ix_(rows, cols)]
-        cost = np.where(sub, d[c][np.ix_(rows, cols)], 1e6)
+        in_rows = inside[c, rows]
+        cols = np.flatnonzero(in_rows.any(axis=0))
+        sub = in_rows[:, cols]
+        cost = np.where(sub, d[c, rows][:, cols], 1e6)
         r, k = linear_sum_assignment(cost)
         ok = sub[r, k]
         index[c, rows[r[ok]]] = blob[c, cols[k[ok]]]
