@@ -3,7 +3,8 @@
 :class:`QualisysServer` runs an asyncio TCP server in a thread of its own. Its
 cameras capture from start-up (QTM's real-time preview) at ``rate_hz``; frame
 *n* (from 1) is taken at ``(n - 1) / rate_hz`` s after start-up and carries
-that time in µs as QTM's timestamp. Each client that asked with
+that time in µs as QTM's timestamp (QTM's clock runs fast by ``clock_drift_ppm``). Each
+client that asked with
 ``StreamFrames`` gets the frames of its choice with the components of its
 choice; ``GetCurrentFrame``, ``GetParameters``, ``GetState``, ``Version``,
 ``QTMVersion``, ``ByteOrder``, ``TakeControl``/``ReleaseControl`` (with an
@@ -54,10 +55,11 @@ class QualisysSimOptions:
     faults: str = ""
     password: str | None = None
     versions: tuple[str, ...] = VERSIONS
+    clock_drift_ppm: float = 0.0
 
     def validate(self) -> None:
         """Raise ValueError naming the first option out of range."""
-        QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed)
+        QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed, self.clock_drift_ppm)
         if not 0 <= self.port <= 65535:
             raise ValueError(f"--port must be 0 to 65535, got {self.port}")
         for spec in parse_schedule(self.faults):
@@ -96,7 +98,9 @@ class QualisysServer:
     def __init__(self, options: QualisysSimOptions) -> None:
         options.validate()
         self.options = options
-        self.scene = QualisysScene(options.markers, options.cameras, options.rate_hz, options.seed)
+        self.scene = QualisysScene(
+            options.markers, options.cameras, options.rate_hz, options.seed, options.clock_drift_ppm
+        )
         self.faults = parse_schedule(options.faults)
         self.fault_log: list[dict[str, Any]] = []
         self.state = qw.EV_CONNECTED

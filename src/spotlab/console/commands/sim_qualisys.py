@@ -22,6 +22,7 @@ def add_qualisys_arguments(p: Any) -> None:
     """The options only ``spotlab sim qualisys`` takes."""
     g = p.add_argument_group("qualisys (QTM real-time server; also --cameras, --markers, "
                              "--rate, --seed, --faults drop@T[:N],disconnect@T[:S], "
+                             "--clock-drift-ppm PPM (QTM's timestamps run fast), "
                              "--truth T.npz, --seconds)")  # fmt: skip
     g.add_argument("--password", help="password TakeControl must give (default: none)")
 
@@ -39,6 +40,7 @@ def qualisys_options(args: argparse.Namespace) -> QualisysSimOptions:
         truth=args.truth,
         faults=args.faults,
         password=args.password,
+        clock_drift_ppm=args.clock_drift_ppm,
     )
     try:
         options.validate()
