@@ -23,6 +23,7 @@ def add_qualisys_arguments(p: Any) -> None:
     g = p.add_argument_group("qualisys (QTM real-time server; also --cameras, --markers, "
                              "--rate, --seed, --faults drop@T[:N],disconnect@T[:S], "
                              "--clock-drift-ppm PPM (QTM's timestamps run fast), "
+                             "--lab DIR --lab-name NAME (frame pulses of QTM's sync output), "
                              "--truth T.npz, --seconds)")  # fmt: skip
     g.add_argument("--password", help="password TakeControl must give (default: none)")
 
@@ -41,6 +42,8 @@ def qualisys_options(args: argparse.Namespace) -> QualisysSimOptions:
         faults=args.faults,
         password=args.password,
         clock_drift_ppm=args.clock_drift_ppm,
+        lab=args.lab,
+        lab_name=args.lab_name or "",
     )
     try:
         options.validate()
