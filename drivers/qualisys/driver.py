@@ -21,6 +21,7 @@ import os
 import select
 import socket
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from spotlab.core.errors import (
@@ -33,8 +34,9 @@ from spotlab.core.errors import (
 )
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.base import Driver
+from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.qualisys.decoder import QualisysDecoder
+from spotlab.drivers.qualisys.discovery import detect_servers
 from spotlab.drivers.qualisys.protocol import (
     COMMAND,
     DEFAULT_PORT,
@@ -125,6 +127,12 @@ class QualisysDriver(Driver):
         self._next_try = 0.0
         self._last_rx = 0.0
         self._stash: list[FrameBlock] = []
+
+    @classmethod
+    def detect(cls, addresses: Sequence[str] = ()) -> list[DeviceInfo]:
+        """QTM servers at 127.0.0.1:22223, at ``$SPOTLAB_QTM`` and at ``addresses``
+        (:func:`~spotlab.drivers.qualisys.discovery.detect_servers`)."""
+        return detect_servers(addresses)
 
     # -- description --------------------------------------------------------------
     @property
