@@ -4,17 +4,22 @@
 clock 150 ppm fast, its synchronisation output published to the lab) and ``spotlab
 sim timer --pty`` (input 0 wired to QTM's sync output) run as separate processes;
 one ``spotlab record --device qualisys=ADDR --device timer=PORT`` records both into
-one journal. Every QTM frame the simulator served must be in the journal (frame
-numbers contiguous, as many as the truth holds), ``spotlab export --c3d`` must give
-the labelled markers of the truth to float32 precision, and ``spotlab export
---timestamps`` must keep QTM's timestamps as the device time and recover QTM's clock
-drift from the timer's edges within 1 ppm.
+one journal, with a third process's LSL stream (``--device lsl=NAME``, 4 channels at
+100 Hz, found by unicast on 127.0.0.1; left out without pylsl). Every QTM frame the
+simulator served must be in the journal (frame numbers contiguous, as many as the
+truth holds), every LSL sample too, ``spotlab export --c3d`` must give the labelled
+markers of the truth to float32 precision, and ``spotlab export --timestamps`` must
+keep QTM's timestamps as the device time and recover QTM's clock drift from the
+timer's edges within 1 ppm.
 """
 
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +36,23 @@ from spotlab.processing.decoding import decoder_for
 
 RATE_HZ = 300.0
 DRIFT_PPM = 150.0
+LSL_NAME = "spotlab-e2e-qualisys-emg"
+#: An LSL outlet in a process of its own: 4 float32 channels at 100 Hz, sample k holding
+#: k in every channel, until stdin closes (prints "ready" once the outlet exists).
+LSL_OUTLET = f"""
+import sys, threading, time
+import pylsl
+info = pylsl.StreamInfo({LSL_NAME!r}, "EMG", 4, 100.0, pylsl.cf_float32, "e2e-qualisys")
+outlet = pylsl.StreamOutlet(info)
+done = threading.Event()
+threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
+print("ready", flush=True)
+k, t0 = 0, time.monotonic()
+while not done.is_set():
+    outlet.push_sample([float(k)] * 4)
+    k += 1
+    time.sleep(max(0.0, t0 + k / 100.0 - time.monotonic()))
+"""
 
 
 @dataclass
@@ -59,14 +81,27 @@ def _session(folder: Path, seconds: float) -> LabRun:
     timer = spawn_cli(
         ["sim", "timer", "--pty", "--rate", 200, "--input", "0=qtm", "--lab", lab], t_out, t_err
     )
+    lsl = _lsl_outlet(folder)
+    cfg = folder / "lsl_api.cfg"
+    cfg.write_text("[lab]\nKnownPeers = {127.0.0.1}\n[log]\nlevel = -3\n")
     try:
         address = first_line(q_out, qtm, q_err, timeout=30.0)
         timer_port = first_line(t_out, timer, t_err, timeout=30.0)
-        result = run_cli(
-            "record", "--device", f"qualisys={address}", "--device", f"timer={timer_port}",
-            "--seconds", seconds, "--out", journal, "--json", timeout=seconds + 40,
-        )  # fmt: skip
+        devices = ["--device", f"qualisys={address}", "--device", f"timer={timer_port}"]
+        if lsl is not None:
+            first_line(folder / "lsl.stdout", lsl, folder / "lsl.stderr", timeout=30.0)
+            devices += ["--device", f"lsl={LSL_NAME}"]
+        with pytest.MonkeyPatch.context() as env:
+            env.setenv("LSLAPICFG", str(cfg))
+            result = run_cli(
+                "record", *devices, "--seconds", seconds, "--out", journal, "--json",
+                timeout=seconds + 40,
+            )  # fmt: skip
     finally:
+        if lsl is not None:
+            assert lsl.stdin is not None
+            lsl.stdin.close()
+            assert stop_process(lsl) in (0, -15)
         assert stop_process(timer) == 0
         assert stop_process(qtm) == 0  # SIGTERM: the simulator writes its truth
     assert result.returncode == 0, result.stderr
@@ -74,8 +109,21 @@ def _session(folder: Path, seconds: float) -> LabRun:
     return LabRun(folder, journal, dict(np.load(truth_path)), streams, seconds)
 
 
+def _lsl_outlet(folder: Path) -> subprocess.Popen[bytes] | None:
+    """The LSL outlet process, or None without pylsl."""
+    try:
+        import pylsl  # noqa: F401
+    except ImportError:
+        return None
+    with open(folder / "lsl.stdout", "wb") as out, open(folder / "lsl.stderr", "wb") as err:
+        return subprocess.Popen(
+            [sys.executable, "-c", LSL_OUTLET], stdin=subprocess.PIPE, stdout=out, stderr=err
+        )
+
+
 def check_every_frame_kept(run: LabRun) -> None:
-    assert set(run.streams) == {"qualisys", "timer"}
+    with_lsl = importlib.util.find_spec("pylsl") is not None
+    assert set(run.streams) == {"qualisys", "timer", *(["lsl"] if with_lsl else [])}
     assert run.streams["qualisys"]["lost_frames"] == 0 and run.streams["qualisys"]["gaps"] == 0
     assert run.streams["timer"]["lost_frames"] == 0
     truth = run.truth
@@ -88,6 +136,13 @@ def check_every_frame_kept(run: LabRun) -> None:
     assert np.array_equal(block.ticks, truth["timestamp_us"])
     markers32 = truth["markers_mm"].astype(np.float32)
     assert np.array_equal(block.data[:, :, 0, :], markers32)
+    if "lsl" in run.streams:  # every LSL sample kept: sample k holds k
+        lsl = FrameBlock.concat(
+            [b for name, b in replay(run.journal, decoder_for) if name == "lsl" and len(b)]
+        )
+        k = lsl.data[:, 0, 0, 0]
+        assert len(lsl) >= 0.8 * 100 * run.seconds and run.streams["lsl"]["lost_frames"] == 0
+        assert np.array_equal(np.diff(k), np.ones(len(k) - 1)), "an LSL sample was lost"
 
     c3d = run.folder / "lab.c3d"
     exported = run_cli("export", run.journal, "--c3d", c3d, timeout=120)
