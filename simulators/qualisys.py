@@ -3,7 +3,8 @@
 :class:`QualisysServer` runs an asyncio TCP server in a thread of its own. Its
 cameras capture from start-up (QTM's real-time preview) at ``rate_hz``; frame
 *n* (from 1) is taken at ``(n - 1) / rate_hz`` s after start-up and carries
-that time in µs as QTM's timestamp. Each client that asked with
+that time in µs as QTM's timestamp (QTM's clock runs fast by ``clock_drift_ppm``). Each
+client that asked with
 ``StreamFrames`` gets the frames of its choice with the components of its
 choice; ``GetCurrentFrame``, ``GetParameters``, ``GetState``, ``Version``,
 ``QTMVersion``, ``ByteOrder``, ``TakeControl``/``ReleaseControl`` (with an
@@ -27,7 +28,9 @@ from typing import Any
 import numpy as np
 
 from spotlab.simulators import qualisys_wire as qw
+from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import parse_schedule
+from spotlab.simulators.lab import LabPublisher, lab_dir
 from spotlab.simulators.qualisys_scene import QualisysScene, SceneFrame
 
 #: Protocol versions the simulator speaks (the layouts of qualisys.md are 1.25's).
@@ -39,6 +42,8 @@ WELCOME = "QTM RT Interface connected"
 EVENT_DELAY_S = 0.05
 #: Fault kinds the QTM simulator injects.
 FAULT_KINDS = ("drop", "disconnect")
+#: Width of the frame pulses of QTM's synchronisation output (published to the lab).
+SYNC_PULSE_WIDTH_S = 100e-6
 
 
 @dataclass
@@ -54,10 +59,13 @@ class QualisysSimOptions:
     faults: str = ""
     password: str | None = None
     versions: tuple[str, ...] = VERSIONS
+    clock_drift_ppm: float = 0.0
+    lab: Path | None = None
+    lab_name: str = ""
 
     def validate(self) -> None:
         """Raise ValueError naming the first option out of range."""
-        QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed)
+        QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed, self.clock_drift_ppm)
         if not 0 <= self.port <= 65535:
             raise ValueError(f"--port must be 0 to 65535, got {self.port}")
         for spec in parse_schedule(self.faults):
@@ -96,7 +104,9 @@ class QualisysServer:
     def __init__(self, options: QualisysSimOptions) -> None:
         options.validate()
         self.options = options
-        self.scene = QualisysScene(options.markers, options.cameras, options.rate_hz, options.seed)
+        self.scene = QualisysScene(
+            options.markers, options.cameras, options.rate_hz, options.seed, options.clock_drift_ppm
+        )
         self.faults = parse_schedule(options.faults)
         self.fault_log: list[dict[str, Any]] = []
         self.state = qw.EV_CONNECTED
@@ -115,6 +125,7 @@ class QualisysServer:
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
+        self.lab: LabPublisher | None = None
 
     # -- life cycle --------------------------------------------------------------
     @property
@@ -145,6 +156,8 @@ class QualisysServer:
             self._loop.call_soon_threadsafe(self._stopping.set)
         self._thread.join(10.0)
         self._thread = None
+        if self.lab is not None:
+            self.lab.stopped(time.monotonic_ns())
         if self.options.truth is not None:
             self.write_truth(self.options.truth)
 
@@ -177,6 +190,23 @@ class QualisysServer:
         with open(path, "wb") as f:
             np.savez(f, **self.truth())
 
+    def _publish(self, t0_ns: int) -> None:
+        """With a lab name: publish the frame pulses of QTM's synchronisation output.
+
+        QTM's clock (:class:`~spotlab.simulators.clock.DeviceClock`, powered up at
+        ``t0_ns``) runs ``clock_drift_ppm`` fast; frame *n* is due at its oscillator time
+        ``(n - 1) (1 + drift) / rate``, which is world time ``t0 + (n - 1) / rate``, and its
+        counter reads the frame's timestamp: a timer input wired to the lab name sees one
+        edge per frame at the frame's true instant.
+        """
+        o = self.options
+        if not o.lab_name:
+            return
+        clock = DeviceClock(drift_ppm=o.clock_drift_ppm, epoch_ns=t0_ns)
+        self.lab = LabPublisher(lab_dir(o.lab), o.lab_name, clock, SYNC_PULSE_WIDTH_S)
+        period_osc = (1.0 + o.clock_drift_ppm * 1e-6) / self.scene.rate_hz
+        self.lab.started(0, t0_ns, 0.0, period_osc)
+
     # -- the event loop ----------------------------------------------------------
     def _run(self) -> None:
         loop = asyncio.new_event_loop()
@@ -193,7 +223,9 @@ class QualisysServer:
         self._stopping = asyncio.Event()
         server = await asyncio.start_server(self._serve_client, "127.0.0.1", self.options.port)
         self.port = int(server.sockets[0].getsockname()[1])
-        self._t0 = time.monotonic()
+        t0_ns = time.monotonic_ns()
+        self._t0 = t0_ns * 1e-9
+        self._publish(t0_ns)
         ticker = asyncio.ensure_future(self._ticker())
         self._ready.set()
         try:

@@ -80,6 +80,9 @@ class QualisysScene:
         Capture rate (Hz).
     seed : int
         The subject (0: the nominal body).
+    clock_drift_ppm : float
+        QTM's clock error: its timestamps run fast by this many parts per million of
+        the true capture times (default 0; |drift| at most 10 000 ppm).
 
     Raises
     ------
@@ -87,13 +90,23 @@ class QualisysScene:
         For counts or a rate out of range.
     """
 
-    def __init__(self, markers: int = 40, cameras: int = 8, rate_hz: float = 100.0, seed: int = 0):
+    def __init__(
+        self,
+        markers: int = 40,
+        cameras: int = 8,
+        rate_hz: float = 100.0,
+        seed: int = 0,
+        clock_drift_ppm: float = 0.0,
+    ):
         if not 1 <= markers <= MAX_MARKERS:
             raise ValueError(f"--markers must be 1 to {MAX_MARKERS}, got {markers}")
         if not 1 <= cameras <= 16:
             raise ValueError(f"--cameras must be 1 to 16, got {cameras}")
         if not 1.0 <= rate_hz <= 2000.0:
             raise ValueError(f"--rate must be 1 to 2000 Hz, got {rate_hz:g}")
+        if not abs(clock_drift_ppm) <= 1e4:
+            raise ValueError(f"--clock-drift-ppm must be -10000 to 10000, got {clock_drift_ppm:g}")
+        self.clock_drift_ppm = float(clock_drift_ppm)
         self.n_markers = markers
         self.rate_hz = float(rate_hz)
         self.seed = seed
@@ -120,8 +133,9 @@ class QualisysScene:
         return (frame - 1) / self.rate_hz
 
     def timestamp_us(self, frame: int) -> int:
-        """QTM's timestamp (µs) of frame number ``frame``."""
-        return round((frame - 1) * 1e6 / self.rate_hz)
+        """QTM's timestamp (µs) of frame number ``frame``: its capture time on QTM's clock
+        (fast by ``clock_drift_ppm``)."""
+        return round((frame - 1) * 1e6 / self.rate_hz * (1.0 + self.clock_drift_ppm * 1e-6))
 
     def frame(self, frame: int) -> SceneFrame:
         """The scene at frame number ``frame`` (computed :data:`CHUNK` frames at a time)."""

@@ -5,6 +5,9 @@ All`` (rate, labels, bodies, cameras), ``TakeControl`` when a password is
 given, then ``StreamFrames AllFrames 3D 6D``. Every byte read and written goes
 to the taps, so a recording holds QTM's packets raw; the decoder
 (:class:`QualisysDecoder`) turns them into frame blocks live and in replay.
+``stop`` sends ``StreamFrames Stop`` then ``Version`` and decodes the stream up to
+the reply to ``Version`` (:meth:`QualisysDriver.drain` hands those frames over), so
+no frame QTM served before the stop is lost.
 
 A lost connection (the server closes it, an error, or nothing at all for
 max(2 s, 20 frame periods)) emits ``disconnected``; ``recv`` then tries every
@@ -18,6 +21,7 @@ import os
 import select
 import socket
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from spotlab.core.errors import (
@@ -30,8 +34,9 @@ from spotlab.core.errors import (
 )
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.base import Driver
+from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.qualisys.decoder import QualisysDecoder
+from spotlab.drivers.qualisys.discovery import detect_servers
 from spotlab.drivers.qualisys.protocol import (
     COMMAND,
     DEFAULT_PORT,
@@ -121,6 +126,13 @@ class QualisysDriver(Driver):
         self._lost_at: float | None = None
         self._next_try = 0.0
         self._last_rx = 0.0
+        self._stash: list[FrameBlock] = []
+
+    @classmethod
+    def detect(cls, addresses: Sequence[str] = ()) -> list[DeviceInfo]:
+        """QTM servers at 127.0.0.1:22223, at ``$SPOTLAB_QTM`` and at ``addresses``
+        (:func:`~spotlab.drivers.qualisys.discovery.detect_servers`)."""
+        return detect_servers(addresses)
 
     # -- description --------------------------------------------------------------
     @property
@@ -170,11 +182,43 @@ class QualisysDriver(Driver):
         if self._sock is not None:
             try:
                 self._send("StreamFrames Stop")
+                self._receive_until_reply()
                 if self.password is not None:
                     self._send("ReleaseControl")
             except OSError:
                 pass
             self._tap_event("stopped")
+
+    def _receive_until_reply(self) -> None:
+        """Receive what QTM sent before it read ``StreamFrames Stop`` (which has no reply):
+        ask ``Version`` and decode the stream up to its reply (replies come in order),
+        keeping the frames for :meth:`drain`, so a recording ends with the last frame
+        QTM served."""
+        assert self._sock is not None and self._decoder is not None
+        dec = self._decoder
+        replies = dec.packets.get(COMMAND, 0) + dec.packets.get(ERROR, 0)
+        self._send("Version")
+        deadline = time.monotonic() + self.reply_timeout
+        while dec.packets.get(COMMAND, 0) + dec.packets.get(ERROR, 0) == replies:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self._sock], [], [], left)[0]:
+                self._tap_event("stop_unconfirmed", reason="no reply to Version after Stop")
+                return
+            data = self._sock.recv(1 << 16)
+            if not data:
+                return
+            arrival = time.monotonic_ns()
+            self.stats.bytes += len(data)
+            self._tap_rx(data, arrival)
+            block = dec.feed(data, arrival)
+            if len(block):
+                self._stash.append(block)
+
+    def drain(self) -> list[FrameBlock]:
+        """Frames received while stopping (before QTM's reply that ends the stream),
+        handed over once."""
+        blocks, self._stash = self._stash, []
+        return blocks
 
     def _close(self) -> None:
         if self._sock is not None:

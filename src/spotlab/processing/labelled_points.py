@@ -17,6 +17,7 @@ import numpy as np
 from spotlab.acquisition._replay_engine import Walk
 from spotlab.core.frames import FrameBlock
 from spotlab.io import Trial
+from spotlab.io.journal import JournalReader
 from spotlab.processing.decoding import decoder_for
 
 #: Longest run of missing frames placed as NaN rows (a longer one is a damaged seq).
@@ -43,18 +44,17 @@ def labelled_trial(path: str | Path) -> tuple[Trial, dict[str, Any]] | None:
         rate) and ``{"input", "stream", "frames", "markers", "rate_hz", "missing_frames"}``;
         None if the recording holds no such stream.
     """
+    # One pass over the records, without decoding: is any stream labelled? (A stream's
+    # metadata may come after another's data: the session starts devices one by one.)
+    if not any(_labels(meta) is not None for meta in JournalReader(path).streams.values()):
+        return None
     blocks: list[FrameBlock] = []
     chosen: str | None = None
     labels: list[str] = []
     rate = 0.0
-    labelled: set[str] = set()
     for _kind, state, block in Walk(Path(path), decoder_for).steps():
-        if _labels(state.metadata) is not None:
-            labelled.add(state.name)
         if block is None or not len(block):
             continue
-        if not labelled:
-            return None  # every stream's metadata comes before the data: none is labelled
         if chosen is None:
             found = _labels(state.metadata)
             if found is None:

@@ -302,3 +302,34 @@ def test_spotlab_sim_qualisys_command(tmp_path: Path) -> None:
     assert set(got) <= set(t["frame"].tolist()) and t["markers_mm"].shape[1:] == (8, 3)
     assert np.allclose(t["time_s"], (t["frame"] - 1) / 50)
     assert t["labels"].tolist()[:2] == ["HEAD", "C7"]
+
+
+def test_clock_drift_and_sync_output_in_the_lab(tmp_path: Path) -> None:
+    """--clock-drift-ppm: timestamps run fast by that many ppm of the true capture times;
+    --lab-name publishes the sync output's frame pulses at those true instants."""
+    from spotlab.simulators.lab import PulseSource
+
+    options = QualisysSimOptions(
+        markers=4, rate_hz=200.0, clock_drift_ppm=500.0, lab=tmp_path, lab_name="qtm"
+    )
+    with QualisysServer(options) as server:
+        peer = Peer(server.port)
+        peer.text()
+        peer.send("StreamFrames AllFrames 3D")
+        frames = [_data(peer.packet()[1])[:2] for _ in range(40)]
+        peer.close()
+        source = PulseSource(tmp_path, "qtm")
+        source.refresh()
+        assert source.clock is not None and source.clock.drift_ppm == 500.0
+        stream = source.streams[0]
+        t0 = source.clock.epoch_ns
+        rises = [p for p in source.pulses(stream, t0 - 1, t0 + 0.0975e9) if p.rising]
+    for ts, n in frames:
+        assert ts == round((n - 1) * 5000 * 1.0005)
+    # frame n's pulse rises (n - 1) / 200 s after power-up (true time), within rounding
+    assert len(rises) == 20
+    k = np.array([p.frame_no for p in rises])
+    assert np.array_equal(k, np.arange(20))
+    np.testing.assert_allclose([p.world_ns - t0 for p in rises], k * 5e6, atol=1e3)
+    with pytest.raises(ValueError, match="clock-drift-ppm"):
+        QualisysSimOptions(clock_drift_ppm=2e4).validate()

@@ -11,7 +11,9 @@ from typing import Any
 
 from serial.tools import list_ports
 
+from spotlab.console.errors import CommandError
 from spotlab.drivers import available_families, load_driver
+from spotlab.io.lab_file import LabFileError, load_lab
 
 BY_ID = Path("/dev/serial/by-id")
 SPOTLAB_LINKS = Path("/dev/spotlab")
@@ -29,6 +31,13 @@ def add_parser(sub: Any) -> None:
         "uses a port.",
     )
     p.add_argument("--probe", action="store_true", help="ask each driver family to detect devices")
+    p.add_argument(
+        "--lab",
+        type=Path,
+        metavar="LAB.toml",
+        help="with --probe: also probe the network devices of this lab file (qualisys "
+        "HOST[:PORT]); QTM is always looked for at 127.0.0.1:22223 and at $SPOTLAB_QTM",
+    )
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=run)
 
@@ -95,14 +104,35 @@ def _probe_ports(simulators: list[dict[str, Any]]) -> list[str]:
     return hardware + [p["device"] for p in simulators]
 
 
+def _lab_addresses(path: Path | None) -> dict[str, list[str]]:
+    """Network addresses of a lab file's devices, by family (none without a lab file)."""
+    if path is None:
+        return {}
+    try:
+        lab = load_lab(path)
+    except LabFileError as exc:
+        raise CommandError(str(exc)) from None
+    out: dict[str, list[str]] = {}
+    for dev in lab.devices:
+        out.setdefault(dev.family, []).append(dev.port)
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     simulators = simulator_ports()
     result: dict[str, Any] = {"serial_ports": list_serial_ports() + simulators, "devices": []}
     if args.probe:
         ports = _probe_ports(simulators)
+        addresses = _lab_addresses(args.lab)
         for family in available_families():
             detect = load_driver(family).detect
-            found = detect(ports) if "ports" in inspect.signature(detect).parameters else detect()
+            params = inspect.signature(detect).parameters
+            if "ports" in params:
+                found = detect(ports)
+            elif "addresses" in params:
+                found = detect(addresses.get(family, []))
+            else:
+                found = detect()
             for dev in found:
                 result["devices"].append(
                     {

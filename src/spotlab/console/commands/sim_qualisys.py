@@ -22,6 +22,8 @@ def add_qualisys_arguments(p: Any) -> None:
     """The options only ``spotlab sim qualisys`` takes."""
     g = p.add_argument_group("qualisys (QTM real-time server; also --cameras, --markers, "
                              "--rate, --seed, --faults drop@T[:N],disconnect@T[:S], "
+                             "--clock-drift-ppm PPM (QTM's timestamps run fast), "
+                             "--lab DIR --lab-name NAME (frame pulses of QTM's sync output), "
                              "--truth T.npz, --seconds)")  # fmt: skip
     g.add_argument("--password", help="password TakeControl must give (default: none)")
 
@@ -39,6 +41,9 @@ def qualisys_options(args: argparse.Namespace) -> QualisysSimOptions:
         truth=args.truth,
         faults=args.faults,
         password=args.password,
+        clock_drift_ppm=args.clock_drift_ppm,
+        lab=args.lab,
+        lab_name=args.lab_name or "",
     )
     try:
         options.validate()
