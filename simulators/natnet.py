@@ -129,6 +129,8 @@ class NatNetServer:
         Fault schedule (see the module docstring).
     multicast : bool
         Send frames to ``239.255.42.99`` on the loopback interface instead of unicast.
+    client_timeout_s : float
+        Seconds after which a unicast client that sent nothing is forgotten.
     """
 
     def __init__(
@@ -140,12 +142,14 @@ class NatNetServer:
         truth: Path | None = None,
         faults: str = "",
         multicast: bool = False,
+        client_timeout_s: float = CLIENT_TIMEOUT_S,
     ) -> None:
         if version not in nw.VERSIONS:
             raise ValueError(f"NatNet version {version} is not one of {nw.VERSIONS}")
         self.scene = scene
         self.version = version
         self.multicast = multicast
+        self.client_timeout_s = client_timeout_s
         self.faults = parse_faults(faults)
         self.truth = NatNetTruth(truth, scene.labels) if truth is not None else None
         self.cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -274,7 +278,7 @@ class NatNetServer:
     def _send_frame(self, k: int) -> None:
         now = time.monotonic()
         for addr, seen in list(self.clients.items()):
-            if now - seen > CLIENT_TIMEOUT_S:
+            if now - seen > self.client_timeout_s:
                 del self.clients[addr]
         if not self.clients and not self.multicast:
             return
