@@ -33,9 +33,10 @@ from spotlab.core.errors import (
 )
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.base import Driver
+from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.natnet.decoding import LAYOUT, NatNetDecoder
 from spotlab.drivers.natnet.multicast import check_group, join_group, local_address
+from spotlab.drivers.natnet.probe import detect_servers, probe_addresses
 from spotlab.drivers.natnet.wire import (
     MAJORS,
     NAT_DISCONNECT,
@@ -323,6 +324,18 @@ class NatNetDriver(Driver):
             self._data.close()
             self._data = None
             self.group = None
+
+    @classmethod
+    def detect(cls) -> list[DeviceInfo]:
+        """NatNet servers that answer at ``127.0.0.1:1510``, or at the addresses of the
+        environment variable ``SPOTLAB_NATNET_PROBE`` (``HOST[:PORT]``, comma-separated)."""
+        addresses = []
+        for text in probe_addresses():
+            try:
+                addresses.append(parse_address(text))
+            except ConfigurationError:
+                continue
+        return detect_servers(addresses)
 
     def _choose_set(self, models: ModelDefinitions) -> tuple[str, tuple[str, ...]]:
         sets = models.marker_sets
