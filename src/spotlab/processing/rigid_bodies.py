@@ -30,16 +30,42 @@ COLUMNS = ("stream", "body", "frame", "x_mm", "y_mm", "z_mm", "qx", "qy", "qz", 
 
 
 def quaternions(r: F64) -> F64:
-    """Unit quaternions (..., 4) x, y, z, w (w >= 0) of rotation matrices (..., 3, 3)."""
+    """Unit quaternions (..., 4) x, y, z, w (w >= 0) of rotation matrices (..., 3, 3).
+
+    Shepperd's method: the largest of 4w², 4x², 4y², 4z² is taken from the diagonal,
+    the others from off-diagonal sums and differences, so no small component comes
+    from the square root of a difference of nearly equal numbers (rotations near
+    180 degrees keep their precision). NaN matrices give NaN quaternions.
+    """
     r = np.asarray(r, dtype=np.float64)
-    w = np.sqrt(np.maximum(0.0, 1.0 + r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2])) / 2
-    x = np.sqrt(np.maximum(0.0, 1.0 + r[..., 0, 0] - r[..., 1, 1] - r[..., 2, 2])) / 2
-    y = np.sqrt(np.maximum(0.0, 1.0 - r[..., 0, 0] + r[..., 1, 1] - r[..., 2, 2])) / 2
-    z = np.sqrt(np.maximum(0.0, 1.0 - r[..., 0, 0] - r[..., 1, 1] + r[..., 2, 2])) / 2
-    x = np.copysign(x, r[..., 2, 1] - r[..., 1, 2])
-    y = np.copysign(y, r[..., 0, 2] - r[..., 2, 0])
-    z = np.copysign(z, r[..., 1, 0] - r[..., 0, 1])
-    return np.stack([x, y, z, w], axis=-1)
+    r00, r11, r22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
+    big = np.stack([1 + r00 + r11 + r22, 1 + r00 - r11 - r22, 1 - r00 + r11 - r22,
+                    1 - r00 - r11 + r22], axis=-1)  # fmt: skip
+    pick = np.argmax(np.nan_to_num(big, nan=-1.0), axis=-1)
+    s = 2.0 * np.sqrt(np.maximum(np.take_along_axis(big, pick[..., None], -1)[..., 0], 1e-300))
+    d21, d02, d10 = (
+        r[..., 2, 1] - r[..., 1, 2],
+        r[..., 0, 2] - r[..., 2, 0],
+        r[..., 1, 0] - r[..., 0, 1],
+    )
+    s21, s02, s10 = (
+        r[..., 2, 1] + r[..., 1, 2],
+        r[..., 0, 2] + r[..., 2, 0],
+        r[..., 1, 0] + r[..., 0, 1],
+    )
+    cases = [
+        (d21 / s, d02 / s, d10 / s, s / 4),  # w largest
+        (s / 4, s10 / s, s02 / s, d21 / s),  # x largest
+        (s10 / s, s / 4, s21 / s, d02 / s),  # y largest
+        (s02 / s, s21 / s, s / 4, d10 / s),  # z largest
+    ]
+    q = np.zeros((*r.shape[:-2], 4))
+    for k, comps in enumerate(cases):
+        sel = pick == k
+        q[sel] = np.stack([c[sel] for c in comps], axis=-1)
+    q *= np.where(q[..., 3:4] < 0, -1.0, 1.0)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q
 
 
 def recording_bodies(path: str | os.PathLike[str]) -> list[tuple[RigidBodies, F64]]:
