@@ -21,6 +21,7 @@ import numpy as np
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers.natnet import NatNetDriver
 from spotlab.drivers.natnet.wire import (
+    NAT_DISCONNECT,
     NAT_MODELDEF,
     NAT_REQUEST_MODELDEF,
     NAT_SERVERINFO,
@@ -47,21 +48,36 @@ def collect(driver: NatNetDriver, seconds: float) -> FrameBlock:
     return FrameBlock.concat(blocks)
 
 
-def ask_raw(address: tuple[str, int], packet: bytes, answer: int, timeout: float = 3.0) -> bytes:
-    """Send ``packet`` from a fresh socket and return the payload of the first ``answer``."""
+def ask_raw(
+    address: tuple[str, int], asks: list[tuple[bytes, int]], timeout: float = 3.0
+) -> list[bytes]:
+    """Send each ``(packet, answer)`` in turn from one fresh socket, as a client does, and
+    return the payload of each answer (then ``NAT_DISCONNECT``, so that the server does
+    not stream to that socket)."""
+    out: list[bytes] = []
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.settimeout(0.5)
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            sock.sendto(packet, address)
-            try:
-                while True:
-                    data = sock.recv(65536)
-                    message_id, payload = split_packet(data)
-                    if message_id == answer:
-                        return payload
-            except TimeoutError:
-                continue
+        try:
+            for packet, answer in asks:
+                out.append(_ask_one(sock, address, packet, answer, timeout))
+        finally:
+            sock.sendto(request(NAT_DISCONNECT), address)
+    return out
+
+
+def _ask_one(
+    sock: socket.socket, address: tuple[str, int], packet: bytes, answer: int, timeout: float
+) -> bytes:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        sock.sendto(packet, address)
+        try:
+            while True:
+                message_id, payload = split_packet(sock.recv(65536))
+                if message_id == answer:
+                    return payload
+        except TimeoutError:
+            continue
     raise AssertionError(f"no message {answer} from {address} within {timeout} s")
 
 
@@ -76,7 +92,8 @@ class NatNetConformance:
         self, natnet_address: str
     ) -> None:
         driver = NatNetDriver(natnet_address)
-        info = parse_server_info(ask_raw(driver.address, connect_request(), NAT_SERVERINFO))
+        (payload,) = ask_raw(driver.address, [(connect_request(), NAT_SERVERINFO)])
+        info = parse_server_info(payload)
         assert info.name, "the server info names no application"
         assert info.version[0] in (3, 4), info
         assert info.app_version[0] >= 1, info
@@ -89,9 +106,11 @@ class NatNetConformance:
         self, natnet_address: str
     ) -> None:
         driver = NatNetDriver(natnet_address)
-        info = parse_server_info(ask_raw(driver.address, connect_request(), NAT_SERVERINFO))
-        payload = ask_raw(driver.address, request(NAT_REQUEST_MODELDEF), NAT_MODELDEF)
-        models = parse_model_definitions(payload, info.version)
+        raw_info, payload = ask_raw(
+            driver.address,
+            [(connect_request(), NAT_SERVERINFO), (request(NAT_REQUEST_MODELDEF), NAT_MODELDEF)],
+        )
+        models = parse_model_definitions(payload, parse_server_info(raw_info).version)
         sets = {k: v for k, v in models.marker_sets.items() if k.lower() != "all"}
         assert sets, f"no marker set but Motive's 'all': {sorted(models.marker_sets)}"
         for name, labels in sets.items():
