@@ -91,15 +91,32 @@ class NatNetTruth:
     times: list[float] = field(default_factory=list)
     markers: list[F64] = field(default_factory=list)
     dropped: list[int] = field(default_factory=list)
+    sent_ns: list[int] = field(default_factory=list)
+    due_ns: list[int] = field(default_factory=list)
+    ticks: list[int] = field(default_factory=list)
 
-    def add(self, frame: int, t_s: float, x_mm: F64) -> None:
+    def add(
+        self,
+        frame: int,
+        t_s: float,
+        x_mm: F64,
+        *,
+        sent_ns: int = 0,
+        due_ns: int = 0,
+        ticks: int = 0,
+    ) -> None:
         self.frames.append(frame)
         self.times.append(t_s)
         self.markers.append(np.array(x_mm, dtype=np.float64))
+        self.sent_ns.append(sent_ns)
+        self.due_ns.append(due_ns)
+        self.ticks.append(ticks)
 
     def write(self) -> None:
         """Write ``time_s`` (F,), ``markers_mm`` (F, M, 3), ``labels`` (M,), ``frame`` (F,),
-        ``dropped`` (frame numbers not sent)."""
+        ``dropped`` (frame numbers not sent), ``sent_ns`` (F,: ``time.monotonic_ns()`` when
+        the frame was sent), ``due_ns`` (F,: when the server's clock reached the frame, on
+        the same clock) and ``ticks`` (F,: its mid-exposure stamp, server clock ticks)."""
         m = len(self.labels)
         x = np.stack(self.markers) if self.markers else np.zeros((0, m, 3))
         np.savez(
@@ -109,6 +126,9 @@ class NatNetTruth:
             labels=np.asarray(self.labels, dtype=str),
             frame=np.asarray(self.frames, dtype=np.int64),
             dropped=np.asarray(self.dropped, dtype=np.int64),
+            sent_ns=np.asarray(self.sent_ns, dtype=np.int64),
+            due_ns=np.asarray(self.due_ns, dtype=np.int64),
+            ticks=np.asarray(self.ticks, dtype=np.int64),
         )
 
 
@@ -129,6 +149,14 @@ class NatNetServer:
         Fault schedule (see the module docstring).
     multicast : bool
         Send frames to ``239.255.42.99`` on the loopback interface instead of unicast.
+    client_timeout_s : float
+        Seconds after which a unicast client that sent nothing is forgotten.
+    clock_drift_ppm : float
+        Error of the server's oscillator in parts per million (positive runs fast):
+        frame ``k`` is taken when the server's clock reads ``k / rate`` s after start,
+        ``k / rate / (1 + drift)`` s of this host's clock.
+    clock_offset_s : float
+        Seconds the server's clock reads at start (its stamps and timestamps).
     """
 
     def __init__(
@@ -140,12 +168,22 @@ class NatNetServer:
         truth: Path | None = None,
         faults: str = "",
         multicast: bool = False,
+        client_timeout_s: float = CLIENT_TIMEOUT_S,
+        clock_drift_ppm: float = 0.0,
+        clock_offset_s: float = 0.0,
     ) -> None:
         if version not in nw.VERSIONS:
             raise ValueError(f"NatNet version {version} is not one of {nw.VERSIONS}")
         self.scene = scene
         self.version = version
         self.multicast = multicast
+        self.client_timeout_s = client_timeout_s
+        if not -1000.0 <= clock_drift_ppm <= 1000.0:
+            raise ValueError(f"the clock drift must be within +-1000 ppm, got {clock_drift_ppm}")
+        if not clock_offset_s >= 0.0:
+            raise ValueError(f"the clock offset must be >= 0 s, got {clock_offset_s}")
+        self.clock_rate = 1.0 + clock_drift_ppm * 1e-6
+        self.clock_offset_s = clock_offset_s
         self.faults = parse_faults(faults)
         self.truth = NatNetTruth(truth, scene.labels) if truth is not None else None
         self.cmd = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -227,7 +265,7 @@ class NatNetServer:
     def _run(self) -> None:
         while not self._stop.is_set():
             now = time.monotonic()
-            due = self._start_s + self._next / self.scene.rate_hz
+            due = self._start_s + self._next / self.scene.rate_hz / self.clock_rate
             wait = max(0.0, due - now)
             ready, _, _ = select.select([self.cmd], [], [], min(wait, 0.05))
             if ready:
@@ -274,7 +312,7 @@ class NatNetServer:
     def _send_frame(self, k: int) -> None:
         now = time.monotonic()
         for addr, seen in list(self.clients.items()):
-            if now - seen > CLIENT_TIMEOUT_S:
+            if now - seen > self.client_timeout_s:
                 del self.clients[addr]
         if not self.clients and not self.multicast:
             return
@@ -286,8 +324,9 @@ class NatNetServer:
                 self.truth.dropped.append(k)
             return
         x = self.scene.markers_mm(np.array([t]))[0]
-        tc, sub = nw.timecode(t)
-        mid = round(t * CLOCK_HZ)
+        clock_s = self.clock_offset_s + t  # the server's clock at frame k: k / rate after start
+        tc, sub = nw.timecode(clock_s)
+        mid = round(clock_s * CLOCK_HZ)
         content = nw.FrameContent(
             frame_number=k,
             marker_set="walker",
@@ -295,7 +334,7 @@ class NatNetServer:
             labelled_ids=[MODEL_ID << 16 | (i + 1) for i in range(x.shape[0])],
             timecode=tc,
             timecode_sub=sub,
-            timestamp_s=t,
+            timestamp_s=clock_s,
             stamps=(mid, mid + CLOCK_HZ // 500, mid + 3 * CLOCK_HZ // 1000),
             rigid_bodies=self.scene.poses(x),
         )
@@ -306,6 +345,8 @@ class NatNetServer:
                 self.data.sendto(pkt, addr)
             except OSError:
                 continue
+        sent_ns = time.monotonic_ns()
         self.frames_sent += 1
         if self.truth is not None:
-            self.truth.add(k, t, x)
+            due_ns = round((self._start_s + k / self.scene.rate_hz / self.clock_rate) * 1e9)
+            self.truth.add(k, t, x, sent_ns=sent_ns, due_ns=due_ns, ticks=mid)

@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.frames import FrameBlock
@@ -47,6 +48,9 @@ class NatNetDecoder:
     labels : sequence of str
         Its marker names (M).
     stats : LinkStats, optional
+    keep_bodies : bool
+        Keep every accepted frame's rigid bodies in :attr:`bodies` (replay of a
+        recording's 6D; the live driver does not need them).
     """
 
     def __init__(
@@ -55,6 +59,8 @@ class NatNetDecoder:
         marker_set: str,
         labels: Sequence[str],
         stats: LinkStats | None = None,
+        *,
+        keep_bodies: bool = False,
     ) -> None:
         if version[0] not in MAJORS:
             raise ConfigurationError(f"NatNet {version[0]}.{version[1]} is not 3.x or 4.x")
@@ -66,6 +72,9 @@ class NatNetDecoder:
         self._last: int | None = None
         #: The last frame decoded (its rigid bodies, labelled markers, timecode).
         self.last_frame: FrameOfData | None = None
+        self.keep_bodies = keep_bodies
+        #: With ``keep_bodies``: (frame number, {rigid body id: pose (9,)}) per frame.
+        self.bodies: list[tuple[int, dict[int, npt.NDArray[np.float64]]]] = []
 
     def feed(self, data: bytes, arrival_ns: int) -> FrameBlock:
         """Decode the complete packets in ``data`` after what is buffered."""
@@ -91,6 +100,8 @@ class NatNetDecoder:
                 continue
             if self._accept(frame.frame_number):
                 rows.append(frame)
+                if self.keep_bodies:
+                    self.bodies.append((frame.frame_number, frame.rigid_bodies))
         return self._block(rows, arrival_ns)
 
     def _accept(self, number: int) -> bool:
@@ -143,9 +154,12 @@ class NatNetDecoder:
         self._last = None
 
 
-def decoder_from_metadata(meta: Mapping[str, Any]) -> NatNetDecoder:
+def decoder_from_metadata(meta: Mapping[str, Any], *, keep_bodies: bool = False) -> NatNetDecoder:
     """The decoder of a recorded NatNet stream, from ``NatNetDriver.metadata()``."""
     version = meta["natnet_version"]
     return NatNetDecoder(
-        (int(version[0]), int(version[1])), str(meta["marker_set"]), list(meta["labels"])
+        (int(version[0]), int(version[1])),
+        str(meta["marker_set"]),
+        list(meta["labels"]),
+        keep_bodies=keep_bodies,
     )

@@ -1,12 +1,17 @@
 """An OptiTrack Motive NatNet server as a spotlab device (docs/protocols/natnet.md).
 
-The driver is a unicast NatNet client: from one UDP socket it sends
-``NAT_CONNECT`` to the server's command port, reads the server info (NatNet
-version, clock), asks for the model descriptions (the marker set's labels), then
-receives the frames the server sends to that socket, sending ``NAT_KEEPALIVE``
-once a second, and ``NAT_DISCONNECT`` when closed. The first frames give the
-frame rate (NatNet does not describe it). Every datagram received is journalled
-raw; the stream is ``point3d``: the marker set's labelled markers, x, y, z in mm.
+The driver is a NatNet client: from one UDP socket it sends ``NAT_CONNECT`` to
+the server's command port, reads the server info (NatNet version, clock, data
+port, multicast group), asks for the model descriptions (the marker set's
+labels), then receives the frames: unicast, those the server sends to that
+socket; multicast (the server info announces it, or ``multicast=GROUP`` asks
+for it), those sent to the group on the data port, received on a second socket
+that joins the group on the interface that routes to the server. It sends
+``NAT_KEEPALIVE`` once a second, and ``NAT_DISCONNECT`` when closed. The first
+frames give the frame rate (NatNet does not describe it). Every datagram
+received is journalled raw; the stream is ``point3d``: the marker set's labelled
+markers, x, y, z in mm. The rigid bodies ride in the same frames: see
+:func:`spotlab.drivers.natnet.bodies.bodies_from_recording`.
 """
 
 from __future__ import annotations
@@ -28,8 +33,10 @@ from spotlab.core.errors import (
 )
 from spotlab.core.frames import FrameBlock
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.base import Driver
+from spotlab.drivers.base import DeviceInfo, Driver
 from spotlab.drivers.natnet.decoding import LAYOUT, NatNetDecoder
+from spotlab.drivers.natnet.multicast import check_group, join_group, local_address
+from spotlab.drivers.natnet.probe import detect_servers, probe_addresses
 from spotlab.drivers.natnet.wire import (
     MAJORS,
     NAT_DISCONNECT,
@@ -38,6 +45,7 @@ from spotlab.drivers.natnet.wire import (
     NAT_MODELDEF,
     NAT_REQUEST_MODELDEF,
     NAT_SERVERINFO,
+    FrameOfData,
     ModelDefinitions,
     NatNetFormatError,
     ServerInfo,
@@ -97,6 +105,10 @@ class NatNetDriver(Driver):
     reconnect_timeout : float, optional
         Seconds of absence after which ``recv`` raises ``DeviceDisconnected``
         (default: never; the session's end or a stop ends the wait).
+    multicast : str, optional
+        ``None`` (default): receive as the server info announces (unicast, or its
+        multicast group on its data port); a group address (``239.255.42.99``):
+        join that group whatever the server announces; ``"off"``: unicast.
     """
 
     family = "natnet"
@@ -110,9 +122,11 @@ class NatNetDriver(Driver):
         reply_timeout: float = 1.0,
         silence_timeout: float = 2.0,
         reconnect_timeout: float | None = None,
+        multicast: str | None = None,
     ) -> None:
         super().__init__(port, name=name)
         self.address = parse_address(self.port)
+        self.want_multicast = check_group(multicast)
         if not reply_timeout > 0 or not silence_timeout > 0:
             raise ConfigurationError("NatNet timeouts must be positive")
         self.want_set = marker_set
@@ -126,6 +140,10 @@ class NatNetDriver(Driver):
         self.labels: tuple[str, ...] = ()
         self.rate_hz = 0.0
         self._sock: socket.socket | None = None
+        #: The multicast data socket, when frames come to a group.
+        self._data: socket.socket | None = None
+        #: ``(group, data port)`` joined, or None (unicast).
+        self.group: tuple[str, int] | None = None
         self._decoder: NatNetDecoder | None = None
         self._spec: StreamSpec | None = None
         self._pending: list[tuple[bytes, int]] = []
@@ -147,6 +165,11 @@ class NatNetDriver(Driver):
             raise DeviceError(f"{self.name}: the NatNet version is known only after start()")
         return self.server.version
 
+    @property
+    def last_frame(self) -> FrameOfData | None:
+        """The last frame decoded (its rigid bodies, labelled markers, timecode)."""
+        return None if self._decoder is None else self._decoder.last_frame
+
     def metadata(self) -> dict[str, Any]:
         """Spec, the server, its NatNet version, marker set and labels, journal layout."""
         server = self.server
@@ -163,6 +186,7 @@ class NatNetDriver(Driver):
             },
             "marker_set": self.marker_set,
             "labels": list(self.labels),
+            "multicast": None if self.group is None else f"{self.group[0]}:{self.group[1]}",
             "rigid_bodies": dict(self.models.rigid_bodies) if self.models else {},
             "layout": LAYOUT,
             "decoder": "spotlab.drivers.natnet:decoder_from_metadata",
@@ -182,22 +206,24 @@ class NatNetDriver(Driver):
         with their arrival stamps; the caller taps them (frames at start-up only once
         the stream is described, so that the journal decodes them)."""
         assert self._sock is not None
-        ready, _, _ = select.select([self._sock], [], [], max(0.0, timeout))
+        socks = [self._sock] if self._data is None else [self._sock, self._data]
+        ready, _, _ = select.select(socks, [], [], max(0.0, timeout))
         out: list[tuple[bytes, int]] = []
-        while ready:
-            try:
-                data = self._sock.recv(65536)
-            except BlockingIOError:
-                break
-            except OSError as exc:  # ICMP port unreachable: nobody listens there
-                if out:
+        for sock in ready:
+            while True:
+                try:
+                    data = sock.recv(65536)
+                except BlockingIOError:
                     break
-                raise DeviceNotFound(
-                    f"{self.name}: no NatNet server at {self.port}: {exc}"
-                ) from exc
-            t_ns = time.monotonic_ns()
-            self.stats.bytes += len(data)
-            out.append((data, t_ns))
+                except OSError as exc:  # ICMP port unreachable: nobody listens there
+                    if out:
+                        break
+                    raise DeviceNotFound(
+                        f"{self.name}: no NatNet server at {self.port}: {exc}"
+                    ) from exc
+                t_ns = time.monotonic_ns()
+                self.stats.bytes += len(data)
+                out.append((data, t_ns))
         if out:
             self._last_rx = time.monotonic()
         return out
@@ -246,6 +272,7 @@ class NatNetDriver(Driver):
                 "this driver reads NatNet 3.x and 4.x"
             )
         self.server = info
+        self._join(info)
         try:
             models = parse_model_definitions(
                 self._ask(request(NAT_REQUEST_MODELDEF), NAT_MODELDEF, "model descriptions"),
@@ -271,6 +298,44 @@ class NatNetDriver(Driver):
         )
         self._last_keepalive = time.monotonic()
         self._tap_event("started", natnet_version=f"{major}.{minor}", rate_hz=self.rate_hz)
+
+    def _join(self, info: ServerInfo) -> None:
+        """Open the multicast data socket when frames come to a group (once per open)."""
+        want = self.want_multicast
+        if want == "off" or (want is None and not info.multicast):
+            return
+        group = want if want is not None else info.group
+        data_port = info.data_port or DEFAULT_PORT + 1
+        if self._data is not None:
+            if self.group == (group, data_port):
+                return
+            self._leave()
+        try:
+            self._data = join_group(group, data_port, local_address(self.address))
+        except OSError as exc:
+            raise DeviceNotFound(
+                f"{self.name}: cannot join the NatNet multicast group {group}:{data_port}: {exc}"
+            ) from exc
+        self.group = (group, data_port)
+        self._tap_event("joined", group=f"{group}:{data_port}")
+
+    def _leave(self) -> None:
+        if self._data is not None:
+            self._data.close()
+            self._data = None
+            self.group = None
+
+    @classmethod
+    def detect(cls) -> list[DeviceInfo]:
+        """NatNet servers that answer at ``127.0.0.1:1510``, or at the addresses of the
+        environment variable ``SPOTLAB_NATNET_PROBE`` (``HOST[:PORT]``, comma-separated)."""
+        addresses = []
+        for text in probe_addresses():
+            try:
+                addresses.append(parse_address(text))
+            except ConfigurationError:
+                continue
+        return detect_servers(addresses)
 
     def _choose_set(self, models: ModelDefinitions) -> tuple[str, tuple[str, ...]]:
         sets = models.marker_sets
@@ -323,6 +388,7 @@ class NatNetDriver(Driver):
                     pass
             self._sock.close()
             self._sock = None
+            self._leave()
             self._tap_event("close", port=self.port)
 
     # -- streaming -----------------------------------------------------------------

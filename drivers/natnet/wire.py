@@ -218,8 +218,8 @@ class FrameOfData:
     labelled_ids : tuple of int
     labelled_m : ndarray of float64, shape (L, 3)
     labelled_params : tuple of int
-    rigid_bodies : dict of int to ndarray (8,)
-        Per id: x, y, z (m), qx, qy, qz, qw, mean error (m).
+    rigid_bodies : dict of int to ndarray (9,)
+        Per id: x, y, z (m), qx, qy, qz, qw, mean error (m), tracking valid (1 or 0).
     timecode, timecode_sub : int
     timestamp_s : float
     stamps : tuple of 3 int
@@ -248,8 +248,9 @@ def _rigid_body(r: Reader, version: Version) -> tuple[int, F64]:
         r.floats(3 * n)
         r.take(f"{n}i{n}f")
     err = r.floats(1)
-    r.take("h")
-    return rb_id, np.concatenate([pose, err])
+    (params,) = r.take("h")
+    valid = np.array([float(int(params) & 0x01)])  # bit 0: tracking valid
+    return rb_id, np.concatenate([pose, err, valid])
 
 
 def _channels(r: Reader) -> None:

@@ -68,7 +68,14 @@ FAMILY_SETTINGS: dict[str, dict[str, tuple[str, Converter, str]]] = {
         "baud": ("baud", _baud, "line rate while streaming, or 'auto'"),
     },
     "qualisys": {"password": ("password", str, "QTM's real-time password (TakeControl)")},
-    "natnet": {"marker_set": ("marker_set", str, "marker set to record (default: the first)")},
+    "natnet": {
+        "marker_set": ("marker_set", str, "marker set to record (default: the first)"),
+        "multicast": (
+            "multicast",
+            str,
+            "multicast group to join, or off (default: as the server info announces)",
+        ),
+    },
 }
 
 #: ``spotlab record`` option -> setting key, the defaults for devices that do not say.

@@ -9,6 +9,10 @@ every ``image2d`` stream resampled at common instants (``--rate``), the cameras 
 streams stacked in stream order (the calibration lists them so), see
 :mod:`spotlab.processing.synchronised_export`.
 
+A recording of labelled 3-D markers (QTM's, Motive's) is written as it is; its rigid
+bodies go beside ``OUT`` as ``OUT``'s stem + ``.bodies.csv``
+(:mod:`spotlab.processing.rigid_bodies`).
+
 ``--timestamps OUT.csv`` writes the session time of every frame of every stream of a
 recording (``stream, seq, time_s, device_ticks, method``), ``--sync-report OUT.json``
 the clock report (reference, drift, jitter and events per stream); see
@@ -42,6 +46,7 @@ from spotlab.processing import (
     write_trial,
 )
 from spotlab.processing.labelled_points import labelled_trial
+from spotlab.processing.rigid_bodies import bodies_path, recording_bodies, write_bodies_csv
 
 
 def add_parser(sub: Any) -> None:
@@ -186,6 +191,11 @@ def run(args: argparse.Namespace) -> int:
         }
     elif suffix == ".spj" and args.calibration is None and (found := labelled_trial(path)):
         trial, summary = found  # labelled 3-D markers (QTM's, Motive's): written as they are
+        if outputs and (bodies := recording_bodies(path)):  # their rigid bodies beside
+            table = bodies_path(outputs[0])
+            check_output_paths([("bodies", table)])
+            summary["bodies"] = str(table)
+            summary["body_rows"] = write_bodies_csv(table, bodies)
     elif suffix in OBSERVATION_SUFFIXES:
         if args.calibration is None and suffix != ".spj":
             raise CommandError(f"{path}: exporting observations needs --calibration RIG.toml")
@@ -222,6 +232,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"  smoothed           {summary['smoothed']}")
         for out in outputs:
             print(f"  wrote              {out}")
+        if "bodies" in summary:
+            print(f"  wrote              {summary['bodies']} ({summary['body_rows']} body rows)")
     return 0
 
 

@@ -43,8 +43,11 @@ def run(args: argparse.Namespace) -> int:
     major, minor = (int(x) for x in args.natnet_version.split("."))
     try:
         server = NatNetServer(
-            scene, version=(major, minor), port=args.port, truth=args.truth, faults=args.faults
-        )
+            scene, version=(major, minor), port=args.port, truth=args.truth, faults=args.faults,
+            clock_drift_ppm=args.clock_drift_ppm, clock_offset_s=args.clock_offset,
+        )  # fmt: skip
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
     except OSError as exc:
         raise CommandError(f"cannot bind 127.0.0.1:{args.port}: {exc.strerror}") from None
     stop = threading.Event()
