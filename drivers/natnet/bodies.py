@@ -1,6 +1,6 @@
 """The rigid bodies of a recorded NatNet stream (the journal holds Motive's frames raw).
 
-The shape is the Qualisys family's (:class:`spotlab.drivers.qualisys.bodies.RigidBodies`):
+The shape is every 6-DOF family's (:class:`spotlab.drivers.recorded_bodies.RigidBodies`):
 names, frame numbers, origins in mm and body-to-world rotation matrices, so that both
 families' 6D read the same; NatNet's own quaternions are kept beside them.
 """
@@ -14,13 +14,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from spotlab.acquisition.replay import replay
-from spotlab.core.errors import RecordingError
-from spotlab.core.frames import FrameBlock
-from spotlab.core.stats import LinkStats
-from spotlab.core.wire import StreamDecoder
 from spotlab.drivers.natnet.decoding import NatNetDecoder, decoder_from_metadata
-from spotlab.drivers.qualisys.bodies import RigidBodies
+from spotlab.drivers.recorded_bodies import RigidBodies, stream_decoders
 
 F64 = npt.NDArray[np.float64]
 
@@ -70,26 +65,14 @@ def bodies_from_recording(path: str | os.PathLike[str], stream: str = "natnet") 
     RecordingError
         If the recording has no such NatNet stream.
     """
-    decoders: list[NatNetDecoder] = []
     described: dict[str, int] = {}
-    found = False
 
-    def factory(meta: dict[str, Any]) -> StreamDecoder:
-        nonlocal found
-        spec = meta.get("spec") or {}
-        if meta.get("family") != "natnet" or spec.get("name") != stream:
-            return _Null()
-        found = True
+    def make(meta: dict[str, Any]) -> NatNetDecoder:
         described.clear()
         described.update({str(k): int(v) for k, v in (meta.get("rigid_bodies") or {}).items()})
-        dec = decoder_from_metadata(meta, keep_bodies=True)
-        decoders.append(dec)
-        return dec
+        return decoder_from_metadata(meta, keep_bodies=True)
 
-    for _ in replay(path, factory):
-        pass
-    if not found:
-        raise RecordingError(f"{os.fspath(path)} holds no natnet stream named {stream!r}")
+    decoders = stream_decoders(path, "natnet", stream, make)
     rows = [row for dec in decoders for row in dec.bodies]
     ids = list(described.values())
     f, b = len(rows), len(ids)
@@ -111,17 +94,3 @@ def bodies_from_recording(path: str | os.PathLike[str], stream: str = "natnet") 
         quaternions=quaternions,
         mean_error_mm=pose[..., 7] * 1000.0,
     )
-
-
-class _Null:
-    """A decoder of the other streams: they are not this function's business."""
-
-    def __init__(self) -> None:
-        self.stats = LinkStats()
-
-    def feed(self, data: bytes, arrival_ns: int) -> FrameBlock:
-        """No frames."""
-        return FrameBlock.empty(0, 1, 1)
-
-    def mark_discontinuity(self) -> None:
-        """Nothing buffered."""

@@ -3,7 +3,7 @@
 Both families that stream rigid bodies record them raw in their frames: Qualisys
 (QTM's 6D component, :func:`spotlab.drivers.qualisys.bodies.bodies_from_recording`)
 and NatNet (Motive's rigid bodies, :func:`spotlab.drivers.natnet.bodies.bodies_from_recording`).
-Both give a :class:`~spotlab.drivers.qualisys.bodies.RigidBodies` (origins in mm,
+Both give a :class:`~spotlab.drivers.recorded_bodies.RigidBodies` (origins in mm,
 body-to-world rotation matrices); :func:`write_bodies_csv` writes every stream's as
 rows ``stream, body, frame, x_mm, y_mm, z_mm, qx, qy, qz, qw`` (``nan`` where the
 body was not tracked), which ``spotlab export REC --c3d OUT`` writes beside ``OUT``
@@ -20,8 +20,8 @@ import numpy as np
 import numpy.typing as npt
 
 from spotlab.drivers.natnet import bodies as natnet_bodies
-from spotlab.drivers.qualisys.bodies import RigidBodies
 from spotlab.drivers.qualisys.bodies import bodies_from_recording as qualisys_bodies
+from spotlab.drivers.recorded_bodies import RigidBodies
 from spotlab.io.journal import JournalReader
 
 F64 = npt.NDArray[np.float64]
