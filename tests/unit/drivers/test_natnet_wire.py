@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -14,46 +16,12 @@ from spotlab.drivers.natnet import (
     parse_server_info,
     split_packet,
 )
+from spotlab.testing.golden import golden_vector
 
-
-def _hex(text: str) -> bytes:
-    return bytes.fromhex(" ".join(text.split()))
-
-
-GOLDEN_SERVER_INFO = (
-    _hex("01 00 17 01 73 70 6F 74 6C 61 62 2D 6E 61 74 6E 65 74 2D 73 69 6D")
-    + bytes(238)
-    + _hex("03 01 00 00 04 01 00 00 80 96 98 00 00 00 00 00 E7 05 00 EF FF 2A 63")
-)
-GOLDEN_FRAME_41 = _hex("""
-    07 00 D1 00 D2 04 00 00 01 00 00 00 23 00 00 00
-    77 61 6C 6B 65 72 00 02 00 00 00 00 00 80 3E 00
-    00 00 BF 00 00 90 3F 00 00 40 BF 00 00 C0 3F 00
-    00 80 3D 00 00 00 00 00 00 00 00 00 00 00 00 00
-    00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00
-    00 00 00 02 00 00 00 34 00 00 00 01 00 01 00 00
-    00 80 3E 00 00 00 BF 00 00 90 3F 00 00 80 3C 0C
-    00 00 00 00 00 02 00 01 00 00 00 40 BF 00 00 C0
-    3F 00 00 80 3D 00 00 80 3C 0C 00 00 00 00 00 00
-    00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 04
-    03 02 01 00 00 00 00 00 00 00 00 00 80 24 40 A0
-    06 1C 06 00 00 00 00 C0 54 1C 06 00 00 00 00 D0
-    7B 1C 06 00 00 00 00 00 00 00 00 00 00 00 00 00
-    00 00 00 00 00
-""")
-GOLDEN_FRAME_31 = _hex("""
-    07 00 A5 00 D2 04 00 00 01 00 00 00 77 61 6C 6B
-    65 72 00 02 00 00 00 00 00 80 3E 00 00 00 BF 00
-    00 90 3F 00 00 40 BF 00 00 C0 3F 00 00 80 3D 00
-    00 00 00 00 00 00 00 00 00 00 00 02 00 00 00 01
-    00 01 00 00 00 80 3E 00 00 00 BF 00 00 90 3F 00
-    00 80 3C 0C 00 00 00 00 00 02 00 01 00 00 00 40
-    BF 00 00 C0 3F 00 00 80 3D 00 00 80 3C 0C 00 00
-    00 00 00 00 00 00 00 00 00 00 00 04 03 02 01 00
-    00 00 00 00 00 00 00 00 80 24 40 A0 06 1C 06 00
-    00 00 00 C0 54 1C 06 00 00 00 00 D0 7B 1C 06 00
-    00 00 00 00 00 00 00 00 00
-""")
+SPEC = Path(__file__).parents[3] / "docs" / "protocols" / "natnet.md"
+GOLDEN_SERVER_INFO = golden_vector(SPEC, "Server info")
+GOLDEN_FRAME_41 = golden_vector(SPEC, "A frame with 2 labelled markers")
+GOLDEN_FRAME_31 = golden_vector(SPEC, "The same frame in NatNet 3.1")
 A, B = [0.25, -0.5, 1.125], [-0.75, 1.5, 0.0625]
 
 

@@ -22,16 +22,14 @@ from spotlab.drivers.qualisys import (
     parse_parameters,
 )
 from spotlab.drivers.qualisys.protocol import COMMAND, DATA, ERROR, EVENT, NO_MORE_DATA, XML
+from spotlab.testing.golden import golden_vector
 
 SPEC = Path(__file__).parents[3] / "docs" / "protocols" / "qualisys.md"
 
 
 def golden(name: str) -> bytes:
     """The bytes of golden vector ``name`` (``G1``...) as the spec writes them."""
-    text = SPEC.read_text().split(f"**{name}**", 1)[1].split("\n**G", 1)[0]
-    block = re.search(r"```\n([0-9a-f \n]+)```", text) or re.search(r"`([0-9a-f ]+)`$", text)
-    assert block, name
-    return bytes.fromhex(block.group(1).replace("\n", " "))
+    return golden_vector(SPEC, name)
 
 
 def test_commands_are_the_golden_bytes() -> None:

@@ -3,7 +3,6 @@ parameters, streaming, control, faults and truth (raw sockets, no client library
 
 from __future__ import annotations
 
-import re
 import socket
 import struct
 import time
@@ -16,16 +15,14 @@ import pytest
 
 from spotlab.simulators import qualisys_wire as qw
 from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
+from spotlab.testing.golden import golden_vector
 
 SPEC = Path(__file__).parents[3] / "docs" / "protocols" / "qualisys.md"
 
 
 def golden(name: str) -> bytes:
     """The bytes of golden vector ``name`` (``G1``...) as the spec writes them."""
-    text = SPEC.read_text().split(f"**{name}**", 1)[1].split("\n**G", 1)[0]
-    block = re.search(r"```\n([0-9a-f \n]+)```", text) or re.search(r"`([0-9a-f ]+)`$", text)
-    assert block, name
-    return bytes.fromhex(block.group(1).replace("\n", " "))
+    return golden_vector(SPEC, name)
 
 
 def test_golden_replies_are_what_the_server_writes() -> None:
