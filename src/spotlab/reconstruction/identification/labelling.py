@@ -288,9 +288,9 @@ def _exchanged_labels(
     point stays free (it fits the marker already taken, nothing else). For a labelled
     marker ``m`` on no segment, with its point ``p``: when exactly one free point ``q``
     fits ``m``, ``q`` fits no missing marker, ``p`` fits exactly one missing marker
-    ``m2``, and ``q`` sits nearer the middle of ``m``'s ranges than ``p`` does, the
-    labels become ``m`` on ``q`` and ``m2`` on ``p``: one more marker labelled, every
-    range kept.
+    ``m2``, ``q`` sits nearer the middle of ``m``'s ranges than ``p`` does and ``p``
+    nearer the middle of ``m2``'s than of ``m``'s, the labels become ``m`` on ``q`` and
+    ``m2`` on ``p``: one more marker labelled, every range kept.
     """
     owner = model.segment_of
     changed = False
@@ -320,13 +320,14 @@ def _exchanged_labels(
             continue
         q = int(free[q_ok][0])
         point_of[m] = -1
-        p_fits = [
-            m2
-            for m2 in missing
-            if _link_fit(model, points, point_of, int(m2), here, tol_mm, min_links)[0][0]
-        ]
+        p_fits = []
+        for m2 in missing:
+            ok, off = _link_fit(model, points, point_of, int(m2), here, tol_mm, min_links)
+            if ok[0]:
+                p_fits.append((int(m2), float(off[0])))
         point_of[m] = p
-        if len(p_fits) != 1:
+        # p must be more an m2 than an m (nearer the middle of m2's ranges than of m's)
+        if len(p_fits) != 1 or not p_fits[0][1] < p_off[0]:
             continue
         q_fits_missing = any(
             _link_fit(model, points, point_of, int(m2), np.array([q]), tol_mm, min_links)[0][0]
@@ -334,9 +335,9 @@ def _exchanged_labels(
         )
         if q_fits_missing:
             continue
-        m2 = int(p_fits[0])
-        labels[q], labels[p] = m, m2
-        point_of[m], point_of[m2] = q, p
+        other = p_fits[0][0]
+        labels[q], labels[p] = m, other
+        point_of[m], point_of[other] = q, p
         changed = True
     return changed
 
