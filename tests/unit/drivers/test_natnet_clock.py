@@ -32,6 +32,24 @@ from spotlab.simulators.natnet_scene import NatNetScene
 RATE = 120.0
 
 
+def test_the_recorded_ticks_are_the_servers_own_stamps(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out, truth = tmp_path / "r.spj", tmp_path / "t.npz"
+    scene = NatNetScene(markers=6, cameras=2, rate_hz=RATE, seed=0)
+    with NatNetServer(scene, truth=truth, clock_drift_ppm=250.0, clock_offset_s=1234.5) as srv:
+        code = main(["record", "--device", f"natnet={srv.address}", "--seconds", "2",
+                     "--out", str(out)])  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    (dev,), _, _ = read_streams(out)
+    t = np.load(truth)
+    row = {int(k): i for i, k in enumerate(t["frame"])}
+    np.testing.assert_array_equal(dev.ticks, t["ticks"][[row[int(k)] for k in dev.seq]])
+    np.testing.assert_array_equal(dev.ticks, np.round((1234.5 + dev.seq / RATE) * CLOCK_HZ))
+
+
+# 16 s of recording: the drift needs them (make long; the ticks are checked above).
+@pytest.mark.long
 def test_the_clock_model_recovers_the_servers_drift(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
