@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import signal
-import sys
-import threading
 from typing import Any
 
+from spotlab.console.commands.sim_serve import serve_until_stopped
 from spotlab.console.errors import CommandError
 from spotlab.processing.paths import check_output_paths
 from spotlab.simulators.natnet import NatNetServer, parse_faults
@@ -50,18 +48,5 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     except OSError as exc:
         raise CommandError(f"cannot bind 127.0.0.1:{args.port}: {exc.strerror}") from None
-    stop = threading.Event()
-
-    def _stop(signum: int, frame: object) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
     server.start()
-    try:
-        print(server.address, flush=True)
-        stop.wait(args.seconds)
-    finally:
-        server.stop()
-    sys.stdout.flush()
-    return 0
+    return serve_until_stopped(server, args.seconds)

@@ -8,11 +8,9 @@ connects to. It serves until stopped (Ctrl-C, SIGTERM) or ``--seconds``.
 from __future__ import annotations
 
 import argparse
-import signal
-import sys
-import threading
 from typing import Any
 
+from spotlab.console.commands.sim_serve import serve_until_stopped
 from spotlab.console.errors import CommandError
 from spotlab.processing.paths import check_output_paths
 from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
@@ -60,17 +58,4 @@ def run_qualisys(args: argparse.Namespace) -> int:
         server = QualisysServer(options).start()
     except OSError as exc:
         raise CommandError(f"cannot listen on 127.0.0.1:{options.port}: {exc}") from None
-    stop = threading.Event()
-
-    def _stop(signum: int, frame: object) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    try:
-        print(server.address, flush=True)
-        stop.wait(args.seconds)
-    finally:
-        server.stop()
-    sys.stdout.flush()
-    return 0
+    return serve_until_stopped(server, args.seconds)
