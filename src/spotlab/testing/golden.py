@@ -3,7 +3,8 @@ family's driver tests and simulator tests check the very bytes the page shows.
 
 A vector is the first block of hex bytes after its bold name (``**G6**``, ``**Server
 info**``): a fenced block, an indented block, or an inline code span ending a line. A
-line ``(N rows of 16 zero bytes)`` inside a block stands for 16 N zero bytes.
+line ``(N rows of 16 zero bytes)`` inside a block stands for 16 N zero bytes; inside a
+fenced block, what follows a line's hex bytes is a comment.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ __all__ = ["golden_vector"]
 
 _ZERO_ROWS = re.compile(r"^\(?(\d+) rows? of 16 zero bytes\)?$")
 _HEX_LINE = re.compile(r"^(?:[0-9A-Fa-f]{2})(?: [0-9A-Fa-f]{2})*$")
+_HEX_PREFIX = re.compile(r"^(?:[0-9A-Fa-f]{2} )*")
 
 
 def golden_vector(page: str | Path, name: str) -> bytes:
@@ -45,14 +47,16 @@ def golden_vector(page: str | Path, name: str) -> bytes:
     if inline:
         return bytes.fromhex(inline.group(1))
     out = bytearray()
-    started = False
+    started = fenced = False
     for raw in after.splitlines()[1:]:
         line = raw.strip()
         if line.startswith("```"):
             if started:
                 break
-            started = True
+            started = fenced = True
             continue
+        if fenced:
+            line = _HEX_PREFIX.match(line + " ").group(0).strip()  # type: ignore[union-attr]
         zeros = _ZERO_ROWS.match(line)
         if _HEX_LINE.match(line) or zeros:
             started = True

@@ -2,29 +2,17 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from spotlab.simulators import centroid_wire as cw
 from spotlab.simulators import wire
+from spotlab.testing.golden import golden_vector
 
-GOLDEN_FRAME = bytes.fromhex(
-    "A5 5A 05 10 07 00 54 00 BD 32"
-    " D2 04 00 00 CB 04 FB 71 20 00 02 00"
-    " 05 00 04 00 F4 01 80 00"
-    " 00 00 03 00 03 00 00 00 D2 04 00 00"
-    " 35 1C DC DF 02 00 00 00"
-    " 10 50 08 40 26 00 C9 00"
-    " 81 01 00 7D 09 00 FF 03"
-    " 80 0C 00 19 46 00 B4 04"
-    " 02 02 00 00 00 00 00 00 B0 04 00 00"
-    " 00 00 00 00 00 00 00 00"
-    " 7B 14"
-)
-GOLDEN_OVERFLOW = bytes.fromhex(
-    "A5 5A 05 10 00 00 30 00 7E A4 00 00 00 00 00 00 00 00 00 00 01 00"
-    " 01 00 01 00 F4 01 80 00 00 01 01 00 07 00 00 00 00 00 00 00 E8 03"
-    " 00 00 00 00 00 00 20 00 40 00 05 00 5A 00 2B C2"
-)
+SPEC = Path(__file__).parents[3] / "docs" / "protocols" / "centroid.md"
+GOLDEN_FRAME = golden_vector(SPEC, "Data frame")
+GOLDEN_OVERFLOW = golden_vector(SPEC, "Overflowing camera")
 
 
 def golden_records() -> list[cw.CameraRecord]:
