@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Any
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -13,7 +14,10 @@ from spotlab.acquisition.live import LiveFrame, LivePipeline, LslMarkers
 from spotlab.acquisition.session import Session
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.streams import StreamSpec
+from spotlab.drivers.natnet import NatNetDriver
 from spotlab.drivers.qualisys import QualisysDriver
+from spotlab.simulators.natnet import NatNetServer
+from spotlab.simulators.natnet_scene import NatNetScene
 from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
 
 pylsl = pytest.importorskip("pylsl", reason="the lsl extra is not installed")
@@ -37,28 +41,33 @@ def _channel_markers(info: Any) -> list[str]:
     return out
 
 
-def test_qualisys_markers_pass_through_the_live_path_to_an_lsl_inlet() -> None:
-    name = f"spotlab-live3d-test-{os.getpid()}"
+class _Run(NamedTuple):
+    live: LivePipeline
+    frames: list[LiveFrame]
+    info: Any  # the LSL stream's full info
+    stamps: Any  # (N,) LSL stamps received
+    rows: Any  # (N, M, 3) float32 received
+    sent_t: Any  # (F,) LSL stamps of the live frames
+
+
+def _through_lsl(driver: Any, name: str) -> _Run:
+    """Session of one driver → LivePipeline(None) → LslMarkers() → an inlet here, 0.6 s."""
     frames: list[LiveFrame] = []
     lsl = LslMarkers(name=name)
     live = LivePipeline(None, [frames.append, lsl])
+    session = Session([driver], [live], close_devices=True)
     inlet = None
-    with QualisysServer(QualisysSimOptions(markers=MARKERS, rate_hz=RATE, seed=3)) as server:
-        session = Session([QualisysDriver(server.address)], [live], close_devices=True)
-        try:
-            session.start()  # the outlet is made here, from the stream's spec
-            found = pylsl.resolve_byprop("name", name, 1, 3.0)
-            assert len(found) == 1, f"outlet {name} not found"
-            inlet = pylsl.StreamInlet(found[0])
-            info = inlet.info(3.0)
-            inlet.open_stream(3.0)
-            time.sleep(0.6)
-        finally:
-            session.stop()
-        truth = server.truth()
-    rows: list[list[float]] = []
-    stamps: list[float] = []
     try:
+        session.start()  # the outlet is made here, from the stream's spec
+        found = pylsl.resolve_byprop("name", name, 1, 3.0)
+        assert len(found) == 1, f"outlet {name} not found"
+        inlet = pylsl.StreamInlet(found[0])
+        info = inlet.info(3.0)
+        inlet.open_stream(3.0)
+        time.sleep(0.6)
+        session.stop()
+        rows: list[list[float]] = []
+        stamps: list[float] = []
         end = time.monotonic() + 3.0
         while time.monotonic() < end:
             x, t = inlet.pull_chunk(0.1)
@@ -66,34 +75,69 @@ def test_qualisys_markers_pass_through_the_live_path_to_an_lsl_inlet() -> None:
             stamps += t
             if not x and stamps:
                 break
+        outlet: Any = lsl.outlet
+        sent_t = outlet.clock.to_lsl(np.array([f.frame_time_s for f in frames]))
     finally:
-        inlet.close_stream()
-        del inlet
-        outlet = lsl.outlet
+        session.stop()
+        if inlet is not None:
+            inlet.close_stream()
+            del inlet
         lsl.close()
-    labels = [str(x) for x in truth["labels"]]
+    m = len(live.labels)
+    got = np.asarray(rows, dtype=np.float32).reshape(len(stamps), m, 3)
+    return _Run(live, frames, info, np.asarray(stamps), got, sent_t)
+
+
+def _check(run: _Run, labels: list[str], markers_mm: Any, time_s: Any, rtol: float = 0.0) -> None:
+    """The live frames are the truth rows given (float32 on the wire: exact, or to
+    ``rtol`` where the wire's float32 are metres); the inlet got them with the labels."""
+    live, frames = run.live, run.frames
     assert live.labels == tuple(labels) and all(f.labels == tuple(labels) for f in frames)
     stats = live.stats()
     assert stats.consumer_errors == 0 and stats.failed == 0 and stats.frames_out == len(frames)
     assert len(frames) >= 0.3 * RATE
-    # Every live frame is the simulator's frame of that number, at QTM's time stamp.
-    row = {int(n): i for i, n in enumerate(truth["frame"])}
-    idx = [row[f.seq] for f in frames]
     want = np.stack([f.points for f in frames])
-    np.testing.assert_array_equal(want, truth["markers_mm"][idx].astype(np.float32))
+    if rtol:
+        np.testing.assert_allclose(want, markers_mm, rtol=rtol, atol=0)
+    else:
+        np.testing.assert_array_equal(want, markers_mm.astype(np.float32))
     times = np.array([f.frame_time_s for f in frames])
-    np.testing.assert_array_equal(times, truth["timestamp_us"][idx] / 1e6)
-    assert all(np.array_equal(f.time_s, np.full(MARKERS, f.frame_time_s)) for f in frames)
+    np.testing.assert_allclose(times, time_s, rtol=0, atol=1e-9)
+    m = len(labels)
+    assert all(np.array_equal(f.time_s, np.full(m, f.frame_time_s)) for f in frames)
     # The LSL stream: MoCap, the marker labels in its channels, the frames as sent.
-    assert info.type() == "MoCap" and info.channel_count() == 3 * MARKERS
-    assert _channel_markers(info) == [m for m in labels for _ in range(3)]
-    assert len(stamps) >= 0.2 * RATE
-    assert outlet is not None
-    sent_t = outlet.clock.to_lsl(times)  # type: ignore[attr-defined]
-    k = np.searchsorted(sent_t, np.asarray(stamps) - 1e-6)
-    np.testing.assert_allclose(sent_t[k], stamps, rtol=0, atol=1e-6)
-    got = np.asarray(rows, dtype=np.float32).reshape(len(stamps), MARKERS, 3)
-    np.testing.assert_array_equal(got, want[k].astype(np.float32))
+    assert run.info.type() == "MoCap" and run.info.channel_count() == 3 * m
+    assert _channel_markers(run.info) == [x for x in labels for _ in range(3)]
+    assert len(run.stamps) >= 0.2 * RATE
+    k = np.searchsorted(run.sent_t, run.stamps - 1e-6)
+    np.testing.assert_allclose(run.sent_t[k], run.stamps, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(run.rows, want[k].astype(np.float32))
+
+
+def test_qualisys_markers_pass_through_the_live_path_to_an_lsl_inlet() -> None:
+    options = QualisysSimOptions(markers=MARKERS, rate_hz=RATE, seed=3)
+    with QualisysServer(options) as server:
+        run = _through_lsl(QualisysDriver(server.address), f"spotlab-live3d-q-{os.getpid()}")
+        truth = server.truth()
+    row = {int(n): i for i, n in enumerate(truth["frame"])}
+    idx = [row[f.seq] for f in run.frames]
+    labels = [str(x) for x in truth["labels"]]
+    _check(run, labels, truth["markers_mm"][idx], truth["timestamp_us"][idx] / 1e6)
+
+
+def test_natnet_markers_pass_through_the_live_path_to_an_lsl_inlet(tmp_path: Path) -> None:
+    scene = NatNetScene(markers=MARKERS, rate_hz=RATE, seed=5)
+    path = tmp_path / "truth.npz"
+    with NatNetServer(scene, truth=path) as server:
+        driver = NatNetDriver(server.address)
+        run = _through_lsl(driver, f"spotlab-live3d-n-{os.getpid()}")
+    truth = np.load(path)
+    row = {int(n): i for i, n in enumerate(truth["frame"])}
+    idx = [row[f.seq] for f in run.frames]
+    labels = [str(x) for x in truth["labels"]]
+    ticks = truth["ticks"][idx]
+    # NatNet sends float32 metres: the driver's mm are within two float32 roundings.
+    _check(run, labels, truth["markers_mm"][idx], ticks / driver.spec.tick_hz, rtol=3e-7)
 
 
 def test_without_a_rig_one_point3d_stream_is_needed() -> None:
