@@ -162,7 +162,8 @@ class PointRecorder:
         }
 
     def save(self, path: str | os.PathLike[str], rate_hz: float | None = None) -> Path:
-        """Write the results: ``.npz`` (every array of :meth:`arrays`) or ``.c3d``.
+        """Write the results: ``.npz`` (every array of :meth:`arrays`) or ``.c3d`` (the
+        frames' marker labels, else ``m<k>``).
 
         Parameters
         ----------
@@ -192,6 +193,9 @@ class PointRecorder:
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise RecordingError(f"{out}: no frame rate for C3D (give rate_hz)")
         points = np.asarray(data["points"], dtype=np.float64)
-        labels = [f"m{i}" for i in range(points.shape[1])]
+        with self._lock:
+            named = self._frames[-1].labels if self._frames else ()
+        labels = list(named) if len(named) == points.shape[1] else None
+        labels = labels or [f"m{i}" for i in range(points.shape[1])]
         write_c3d(out, Trial(points=points, labels=labels, point_rate=rate_hz))
         return out

@@ -1,4 +1,4 @@
-"""Labelled 3-D markers of a vendor system (Qualisys) through the live path and out on LSL."""
+"""Labelled 3-D markers of a vendor system (Qualisys, NatNet) through the live path, out on LSL."""
 
 from __future__ import annotations
 
@@ -10,12 +10,13 @@ from typing import Any, NamedTuple
 import numpy as np
 import pytest
 
-from spotlab.acquisition.live import LiveFrame, LivePipeline, LslMarkers
+from spotlab.acquisition.live import LiveFrame, LivePipeline, LslMarkers, PointRecorder
 from spotlab.acquisition.session import Session
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.streams import StreamSpec
 from spotlab.drivers.natnet import NatNetDriver
 from spotlab.drivers.qualisys import QualisysDriver
+from spotlab.io.c3d_files import read_c3d
 from spotlab.simulators.natnet import NatNetServer
 from spotlab.simulators.natnet_scene import NatNetScene
 from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
@@ -114,7 +115,7 @@ def _check(run: _Run, labels: list[str], markers_mm: Any, time_s: Any, rtol: flo
     np.testing.assert_array_equal(run.rows, want[k].astype(np.float32))
 
 
-def test_qualisys_markers_pass_through_the_live_path_to_an_lsl_inlet() -> None:
+def test_qualisys_markers_pass_through_the_live_path_to_an_lsl_inlet(tmp_path: Path) -> None:
     options = QualisysSimOptions(markers=MARKERS, rate_hz=RATE, seed=3)
     with QualisysServer(options) as server:
         run = _through_lsl(QualisysDriver(server.address), f"spotlab-live3d-q-{os.getpid()}")
@@ -123,6 +124,12 @@ def test_qualisys_markers_pass_through_the_live_path_to_an_lsl_inlet() -> None:
     idx = [row[f.seq] for f in run.frames]
     labels = [str(x) for x in truth["labels"]]
     _check(run, labels, truth["markers_mm"][idx], truth["timestamp_us"][idx] / 1e6)
+    # The live points saved as C3D keep the labels.
+    rec = PointRecorder()
+    for frame in run.frames:
+        rec(frame)
+    trial = read_c3d(rec.save(tmp_path / "live.c3d"))
+    assert list(trial.labels) == labels
 
 
 def test_natnet_markers_pass_through_the_live_path_to_an_lsl_inlet(tmp_path: Path) -> None:
