@@ -1,4 +1,5 @@
-"""The live pipeline: image2d frames to 3-D points in the reader thread, with latency.
+"""The live pipeline: image2d frames to 3-D points in the reader thread, with latency;
+labelled point3d streams (Qualisys, NatNet) passed through.
 
 See ``docs/live.md``.
 """

@@ -1,5 +1,9 @@
 """The live pipeline: image2d frames in, 3-D markers out, in the reader thread.
 
+A labelled ``point3d`` stream (Qualisys, OptiTrack NatNet: markers the vendor's system
+reconstructed already) goes through without a rig or triangulation: its points are the
+result, handed out with their labels and session times.
+
 Per frame of each ``image2d`` stream: image coordinates per camera (PSD rule of
 :mod:`~spotlab.acquisition.live.readings`), session time of the frame from the stream's
 clock and of each marker's sample (plus its LED slot offset,
@@ -118,10 +122,23 @@ class _Stream:
         return np.asarray(clock(ticks), dtype=np.float64).reshape(ticks.shape)
 
 
-class _Item(NamedTuple):
-    """One frame of one stream waiting to be triangulated."""
+def point_labels(spec: StreamSpec) -> tuple[str, ...]:
+    """Marker names of a stream: ``metadata["marker_labels"]`` if one per marker, else ``m<k>``."""
+    labels = spec.metadata.get("marker_labels")
+    if isinstance(labels, list) and len(labels) == spec.n_markers:
+        return tuple(str(x) for x in labels)
+    return tuple(f"m{k}" for k in range(spec.n_markers))
 
-    uv: FloatArray  # (S, M, 2)
+
+def is_points(spec: StreamSpec) -> bool:
+    """Whether a stream holds 3-D points already: kind ``point3d``, one sensor, x, y, z first."""
+    return spec.kind == "point3d" and spec.n_sensors == 1 and spec.values[:3] == ("x", "y", "z")
+
+
+class _Item(NamedTuple):
+    """One frame of one stream waiting to be triangulated (or passed through)."""
+
+    uv: FloatArray  # (S, M, 2) image coordinates, or (M, 3) points of a point3d stream
     arrival_ns: int
     seq: int
     stream: _Stream
@@ -133,15 +150,20 @@ class LivePipeline(SinkBase):
 
     Parameters
     ----------
-    rig : Rig
+    rig : Rig or None
         The calibrated cameras, for example ``Rig.load("rig.toml")``: the cameras of
-        the streams in order (stream 0's sensors first).
+        the streams in order (stream 0's sensors first). None: the input is one
+        ``point3d`` stream of 3-D markers (x, y, z in mm, for example Qualisys or
+        NatNet), passed through without triangulation.
     consumers : iterable of callable
         Each called with every :class:`LiveFrame`, in frame order, from a reader
-        thread: keep them quick (:class:`LslMarkers`, :class:`PointRecorder`).
+        thread: keep them quick (:class:`LslMarkers`, :class:`PointRecorder`). A
+        consumer with an ``on_configure(spec)`` method is told the output's
+        ``point3d`` spec (markers, rate, labels) when the inputs are set.
     streams : sequence of str, optional
         Names of the image2d streams whose cameras make up the rig, in rig order.
-        Default: every image2d device of the session, in session order.
+        Default: every image2d device of the session, in session order. Without a
+        rig: the name of the one point3d stream (default: the session's only one).
     clocks : mapping of str to ClockLike, optional
         Clock of each stream; default: device ticks times the tick period. Streams
         matched by time need clocks on one time base (or shared ticks).
@@ -158,7 +180,7 @@ class LivePipeline(SinkBase):
     Raises
     ------
     ConfigurationError
-        If ``rig`` is not a Rig.
+        If ``rig`` is not a Rig or None.
 
     Notes
     -----
@@ -173,7 +195,7 @@ class LivePipeline(SinkBase):
 
     def __init__(
         self,
-        rig: Rig,
+        rig: Rig | None,
         consumers: Iterable[Consumer] = (),
         *,
         streams: Sequence[str] | None = None,
@@ -183,7 +205,7 @@ class LivePipeline(SinkBase):
         name: str = "live",
         inline: bool = True,
     ) -> None:
-        if not isinstance(rig, Rig):
+        if rig is not None and not isinstance(rig, Rig):
             raise ConfigurationError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
         self.rig = rig
         self.name = name
@@ -193,11 +215,12 @@ class LivePipeline(SinkBase):
         self._clocks = dict(clocks or {})
         self._tolerance = tolerance_s
         self._max_wait = max_wait_s
-        self._triangulate = FrameTriangulator(rig)
+        self._triangulate = None if rig is None else FrameTriangulator(rig)
         self._streams: dict[str, _Stream] = {}
         self._matcher: FrameMatcher[_Item] | None = None
         self._lock = threading.Lock()
-        self._uv = np.full((len(rig), 0, 2), np.nan)
+        self._uv = np.full((0 if rig is None else len(rig), 0, 2), np.nan)
+        self.labels: tuple[str, ...] = ()
         self.latency = LatencyStats()
         self._index = 0
         self._unclocked = self._failed = self._consumer_errors = 0
@@ -224,6 +247,10 @@ class LivePipeline(SinkBase):
             add up to the rig's, or their marker counts differ.
         """
         by_name = {s.name: s for s in specs}
+        rig = self.rig
+        if rig is None:
+            self._configure_points(by_name)
+            return
         if self._wanted is None:
             chosen = [s for s in by_name.values() if s.kind == "image2d"]
         else:
@@ -235,10 +262,10 @@ class LivePipeline(SinkBase):
         if wrong or not chosen:
             raise ConfigurationError(f"live pipeline needs image2d streams; got {wrong or 'none'}")
         cameras = sum(s.n_sensors for s in chosen)
-        if cameras != len(self.rig):
+        if cameras != len(rig):
             raise ConfigurationError(
                 f"the streams {[s.name for s in chosen]} have {cameras} cameras but the rig "
-                f"has {len(self.rig)}"
+                f"has {len(rig)}"
             )
         markers = {s.n_markers for s in chosen}
         if len(markers) > 1:
@@ -260,13 +287,58 @@ class LivePipeline(SinkBase):
             if len(chosen) > 1
             else None
         )
-        self._uv = np.full((len(self.rig), markers.pop(), 2), np.nan)
+        n_markers = markers.pop()
+        self._uv = np.full((len(rig), n_markers, 2), np.nan)
         self._streams = streams
+        self.labels = tuple(f"m{k}" for k in range(n_markers))
+        self._tell_consumers(n_markers, chosen[0].rate_hz)
         # Warm-up: the first call's numpy paths (the lenses' undistortion start is
         # already fitted by the triangulator's construction).
-        centre = np.mean([cam.center for cam in self.rig], axis=0)
-        ahead = np.mean([cam.R[2] for cam in self.rig], axis=0)
-        self._triangulate(self.rig.project(centre[None] + 1000.0 * ahead[None]))
+        centre = np.mean([cam.center for cam in rig], axis=0)
+        ahead = np.mean([cam.R[2] for cam in rig], axis=0)
+        assert self._triangulate is not None
+        self._triangulate(rig.project(centre[None] + 1000.0 * ahead[None]))
+
+    def _configure_points(self, by_name: Mapping[str, StreamSpec]) -> None:
+        """Without a rig: one ``point3d`` stream whose points pass through."""
+        if self._wanted is None:
+            chosen = [s for s in by_name.values() if s.kind == "point3d"]
+        else:
+            missing = [n for n in self._wanted if n not in by_name]
+            if missing:
+                raise ConfigurationError(f"live pipeline: no stream named {missing}")
+            chosen = [by_name[n] for n in self._wanted]
+        if len(chosen) != 1 or not is_points(chosen[0]):
+            raise ConfigurationError(
+                "live pipeline without a rig needs one point3d stream of x, y, z; got "
+                f"{[(s.name, s.kind) for s in chosen] or 'none'}"
+            )
+        spec = chosen[0]
+        unknown = sorted(set(self._clocks) - {spec.name})
+        if unknown:
+            raise ConfigurationError(f"clocks given for streams not read here: {unknown}")
+        self._streams = {spec.name: _Stream(0, spec, 0, self._clocks.get(spec.name))}
+        self._matcher = None
+        self.labels = point_labels(spec)
+        self._tell_consumers(spec.n_markers, spec.rate_hz)
+
+    def _tell_consumers(self, n_markers: int, rate_hz: float) -> None:
+        """Call ``on_configure(spec)`` of the consumers that have it: the output's spec."""
+        spec = StreamSpec(
+            name=self.name,
+            kind="point3d",
+            n_sensors=1,
+            n_markers=n_markers,
+            rate_hz=rate_hz,
+            tick_hz=1e9,
+            values=("x", "y", "z"),
+            units=("mm", "mm", "mm"),
+            metadata={"marker_labels": list(self.labels)},
+        )
+        for consumer in self.consumers:
+            hook = getattr(consumer, "on_configure", None)
+            if callable(hook):
+                hook(spec)
 
     # -- frames -----------------------------------------------------------------
     def on_block(self, stream: str, block: Any) -> None:
@@ -274,7 +346,10 @@ class LivePipeline(SinkBase):
         st = self._streams.get(stream)
         if st is None or not len(block):
             return
-        uv = pixels(st.spec, block.data, block.flags)
+        if self._triangulate is None:  # 3-D points already: x, y, z of the one sensor
+            uv = np.asarray(block.data[:, :, 0, :3], dtype=np.float64)
+        else:
+            uv = pixels(st.spec, block.data, block.flags)
         with self._lock:
             st.frames += len(block)
             try:
@@ -312,7 +387,12 @@ class LivePipeline(SinkBase):
             for g in members:
                 uv[g.stream.cameras] = g.uv
         try:
-            X, rms, n_views = self._triangulate(uv)
+            if self._triangulate is None:  # passed through: the vendor's reconstruction
+                X = uv.copy()
+                rms = np.full(len(X), np.nan)
+                n_views = np.zeros(len(X), dtype=np.intp)
+            else:
+                X, rms, n_views = self._triangulate(uv)
         except SpotlabError as exc:
             self._failed += 1
             if self._failures.add(exc):  # the first of its kind: counted all the same
@@ -329,6 +409,7 @@ class LivePipeline(SinkBase):
             residual_px=rms,
             n_views=n_views,
             arrival_ns=last.arrival_ns,
+            labels=self.labels,
         )
         self._index += 1
         latency = time.monotonic_ns() - last.arrival_ns

@@ -6,12 +6,13 @@ import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.core.errors import ConfigurationError, RecordingError
+from spotlab.core.streams import StreamSpec
 
 __all__ = ["LiveFrame", "LslMarkers", "MarkerPusher", "PointRecorder"]
 
@@ -33,14 +34,18 @@ class LiveFrame:
     time_s : ndarray, shape (M,)
         Session time of each marker's sample (frame time plus its LED slot offset), s.
     points : ndarray, shape (M, 3)
-        Marker positions, mm; NaN where fewer than two cameras saw a marker.
+        Marker positions, mm; NaN where fewer than two cameras saw a marker (or,
+        passed through from a ``point3d`` stream, where its system had no point).
     residual_px : ndarray, shape (M,)
-        RMS distance of the marker's rays from its point, undistorted px; NaN with it.
+        RMS distance of the marker's rays from its point, undistorted px; NaN with it
+        (and NaN for points passed through: not triangulated here).
     n_views : ndarray of int, shape (M,)
-        Cameras that saw each marker.
+        Cameras that saw each marker (0 for points passed through: not known here).
     arrival_ns : int
         Host arrival of the last byte of the frame (the latest of the group's streams),
         ``time.monotonic_ns`` clock.
+    labels : tuple of str
+        Marker names (M,): a ``point3d`` stream's ``marker_labels``, else ``m<k>``.
     """
 
     index: int
@@ -51,6 +56,7 @@ class LiveFrame:
     residual_px: FloatArray
     n_views: NDArray[np.intp]
     arrival_ns: int
+    labels: tuple[str, ...] = ()
 
 
 class MarkerPusher(Protocol):
@@ -65,17 +71,51 @@ class LslMarkers:
 
     Parameters
     ----------
-    outlet : MarkerOutlet
+    outlet : MarkerOutlet, optional
         For example ``MarkerOutlet(n_markers, rate_hz)`` (the ``lsl`` extra); its
-        timestamps are the frames' session times.
+        timestamps are the frames' session times. Default: a ``MarkerOutlet`` made
+        when the pipeline sets its inputs (:meth:`on_configure`), with the pipeline's
+        marker count, rate and labels (a ``point3d`` stream's ``marker_labels``).
+    **outlet_kwargs
+        For the outlet made here: ``name``, ``source_id``, ``channel_format``,
+        ``clock``, ``max_buffered_s`` (see ``MarkerOutlet``).
     """
 
-    def __init__(self, outlet: MarkerPusher) -> None:
+    def __init__(self, outlet: MarkerPusher | None = None, **outlet_kwargs: Any) -> None:
         self.outlet = outlet
+        self._kwargs = outlet_kwargs
+        self._made = False
+
+    def on_configure(self, spec: StreamSpec) -> None:
+        """Make the outlet (if none was given) for the pipeline's output ``spec``.
+
+        Raises
+        ------
+        ConfigurationError
+            If pylsl is missing.
+        """
+        if self.outlet is not None:
+            return
+        from spotlab.acquisition.lsl import MarkerOutlet
+
+        labels = [str(x) for x in spec.metadata.get("marker_labels", [])]
+        self.outlet = MarkerOutlet(spec.n_markers, spec.rate_hz, labels=labels, **self._kwargs)
+        self._made = True
 
     def __call__(self, frame: LiveFrame) -> None:
         """Push the frame (its time is the frame time: one LSL sample per frame)."""
+        if self.outlet is None:
+            raise ConfigurationError("LslMarkers has no outlet: the pipeline was not configured")
         self.outlet.push_markers(np.array([frame.frame_time_s]), frame.points)
+
+    def close(self) -> None:
+        """Close the outlet made here (its ports close); one given stays the caller's."""
+        if self._made and self.outlet is not None:
+            close = getattr(self.outlet, "close", None)
+            if callable(close):
+                close()
+            self.outlet = None
+            self._made = False
 
 
 class PointRecorder:
@@ -122,7 +162,8 @@ class PointRecorder:
         }
 
     def save(self, path: str | os.PathLike[str], rate_hz: float | None = None) -> Path:
-        """Write the results: ``.npz`` (every array of :meth:`arrays`) or ``.c3d``.
+        """Write the results: ``.npz`` (every array of :meth:`arrays`) or ``.c3d`` (the
+        frames' marker labels, else ``m<k>``).
 
         Parameters
         ----------
@@ -152,6 +193,9 @@ class PointRecorder:
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise RecordingError(f"{out}: no frame rate for C3D (give rate_hz)")
         points = np.asarray(data["points"], dtype=np.float64)
-        labels = [f"m{i}" for i in range(points.shape[1])]
+        with self._lock:
+            named = self._frames[-1].labels if self._frames else ()
+        labels = list(named) if len(named) == points.shape[1] else None
+        labels = labels or [f"m{i}" for i in range(points.shape[1])]
         write_c3d(out, Trial(points=points, labels=labels, point_rate=rate_hz))
         return out
