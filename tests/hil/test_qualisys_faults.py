@@ -58,6 +58,9 @@ def test_every_qualisys_fault_counted_and_no_served_frame_lost(tmp_path: Path) -
     assert s["gaps"] == 4
     restarted = np.flatnonzero(np.diff(truth["qtm_frame"]) < 0)
     assert len(restarted) == 1, "the truth holds one capture restart"
+    events = s["device_summary"]["events"]
+    assert events.count("capture stopped") == events.count("capture started") == 1, events
+    assert events.count("connection closed") == 1, events
 
     # Every frame served is in the journal, in order.
     block = FrameBlock.concat(
