@@ -18,7 +18,9 @@ frames due meanwhile behind them, as TCP keeps the order), ``restart@T`` (the
 capture stopped and started again: ``CaptureStopped``, no frames for
 :data:`RESTART_PAUSE_S`, ``CaptureStarted``, frame numbers and timestamps from 1
 and 0 again) and ``slow@T[:N]`` (the client's socket is full: the server skips
-the N frames for it, and says nothing, as QTM does; its numbers skip).
+the N frames for it, and says nothing, as QTM does; its numbers skip). A client
+that really reads too slowly gets the same: once more than :data:`SEND_LIMIT`
+bytes wait for it, its frames are skipped (``skipped`` in the truth).
 The truth (``truth()``, or the ``.npz`` written by :meth:`QualisysServer.stop`)
 holds every frame sent to at least one client.
 """
@@ -53,6 +55,9 @@ FAULT_KINDS = ("drop", "disconnect", "late", "restart", "slow")
 LATE_S = 0.05
 #: Seconds without frames between ``CaptureStopped`` and ``CaptureStarted`` of a ``restart``.
 RESTART_PAUSE_S = 0.1
+#: Bytes waiting for a client's socket beyond which its frames are skipped (a client too
+#: slow for the stream: QTM drops its frames rather than queue them, and says nothing).
+SEND_LIMIT = 256 * 1024
 #: Width of the frame pulses of QTM's synchronisation output (published to the lab).
 SYNC_PULSE_WIDTH_S = 100e-6
 
@@ -299,6 +304,12 @@ class QualisysServer:
             t.late.append(n)
         number = n - self._base
         frame = self.scene.frame(n)
+        full = [c for c in takers if c.writer.transport.get_write_buffer_size() > SEND_LIMIT]
+        if full:
+            t.skipped.append(n)
+            takers = [c for c in takers if c not in full]
+            if not takers:
+                return
         for client in takers:
             data = self._data(number, frame, client.components)
             if n < self._hold_until:
