@@ -84,12 +84,10 @@ class QualisysSimOptions:
         QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed, self.clock_drift_ppm)
         if not 0 <= self.port <= 65535:
             raise ValueError(f"--port must be 0 to 65535, got {self.port}")
-        for spec in parse_schedule(self.faults, FAULT_KINDS):
-            if spec.kind not in FAULT_KINDS:
-                raise ValueError(
-                    f"--faults: the qualisys simulator injects {', '.join(FAULT_KINDS)}, "
-                    f"not {spec.kind!r}"
-                )
+        try:
+            parse_schedule(self.faults, FAULT_KINDS)
+        except ValueError as exc:
+            raise ValueError(f"--faults: {exc} (the qualisys simulator's kinds)") from None
 
 
 @dataclass(eq=False)
