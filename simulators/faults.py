@@ -59,8 +59,10 @@ class FaultSpec:
     arg: float | None = None
 
 
-def parse_schedule(text: str) -> list[FaultSpec]:
+def parse_schedule(text: str, kinds: tuple[str, ...] = FAULT_KINDS) -> list[FaultSpec]:
     """Parse ``"bitflip@1.5,overflow@5:3,disconnect@7:0.5"`` into fault specs, sorted by time.
+
+    ``kinds`` are the kinds accepted (default: the MCS-1 simulator's).
 
     Raises
     ------
@@ -74,10 +76,8 @@ def parse_schedule(text: str) -> list[FaultSpec]:
             continue
         kind, at, rest = item.partition("@")
         kind = kind.strip().lower()
-        if kind not in FAULT_KINDS:
-            raise ValueError(
-                f"fault {item!r}: unknown kind {kind!r}; known: {', '.join(FAULT_KINDS)}"
-            )
+        if kind not in kinds:
+            raise ValueError(f"fault {item!r}: unknown kind {kind!r}; known: {', '.join(kinds)}")
         if not at:
             raise ValueError(f"fault {item!r}: needs a time, as in {kind}@2.5")
         when, _, arg_text = rest.partition(":")

@@ -12,7 +12,13 @@ goes to the truth (:class:`NatNetTruth`) when one is given.
 Faults (``faults``, comma-separated, times in s after the first connect):
 ``drop@T`` (the frame due at T is not sent), ``drop@T:N`` (N frames from T),
 ``disconnect@T`` (the server falls silent for good: no frames, no replies) and
-``disconnect@T:D`` (silent for D s, then back; frame numbers go on).
+``disconnect@T:D`` (silent for D s, then back; frame numbers go on),
+``late@T[:N]`` (N frames held back and sent :data:`LATE_S` after the last of them
+was due, the frames due meanwhile behind them), ``restart@T`` (Motive's frame
+numbers start again from 0, as when a take restarts; the stream goes on) and
+``slow@T[:N]`` (a client too slow for the stream: its socket buffer is full, so
+the N frames the server sends from T are lost in it; emulated by not sending
+them, the truth lists them in ``overflowed``).
 """
 
 from __future__ import annotations
@@ -37,12 +43,15 @@ F64 = npt.NDArray[np.float64]
 CLIENT_TIMEOUT_S = 10.0
 CLOCK_HZ = 10_000_000
 MULTICAST_GROUP = "239.255.42.99"
+#: Seconds a ``late`` fault holds its frames back after the last of them was due.
+LATE_S = 0.05
+FAULT_KINDS = ("drop", "disconnect", "late", "restart", "slow")
 
 
 @dataclass(frozen=True)
 class NatNetFault:
-    """One scheduled fault: ``kind`` (drop, disconnect), time ``at_s``, and ``n`` frames
-    (drop) or ``duration_s`` (disconnect; inf: for good)."""
+    """One scheduled fault: ``kind`` (one of :data:`FAULT_KINDS`), time ``at_s``, and ``n``
+    frames (drop, late, slow) or ``duration_s`` (disconnect; inf: for good)."""
 
     kind: str
     at_s: float
@@ -51,7 +60,8 @@ class NatNetFault:
 
 
 def parse_faults(text: str) -> list[NatNetFault]:
-    """``drop@T[:N]`` and ``disconnect@T[:D]`` items, comma-separated.
+    """``drop@T[:N]``, ``disconnect@T[:D]``, ``late@T[:N]``, ``restart@T`` and
+    ``slow@T[:N]`` items, comma-separated.
 
     Raises
     ------
@@ -66,15 +76,18 @@ def parse_faults(text: str) -> list[NatNetFault]:
             if not at:
                 raise ValueError
             at_s = float(when)
-            if kind == "drop":
-                out.append(NatNetFault("drop", at_s, n=int(arg) if arg else 1))
+            if kind in ("drop", "late", "slow"):
+                out.append(NatNetFault(kind, at_s, n=int(arg) if arg else 1))
+            elif kind == "restart" and not arg:
+                out.append(NatNetFault(kind, at_s))
             elif kind == "disconnect":
                 out.append(NatNetFault("disconnect", at_s, duration_s=float(arg or "inf")))
             else:
                 raise ValueError
         except ValueError:
             raise ValueError(
-                f"fault {item!r}: expected drop@T[:N] or disconnect@T[:SECONDS]"
+                f"fault {item!r}: expected drop@T[:N], disconnect@T[:SECONDS], late@T[:N], "
+                "restart@T or slow@T[:N]"
             ) from None
         if not at_s >= 0:
             raise ValueError(f"fault {item!r}: T must be >= 0 s")
@@ -94,6 +107,9 @@ class NatNetTruth:
     sent_ns: list[int] = field(default_factory=list)
     due_ns: list[int] = field(default_factory=list)
     ticks: list[int] = field(default_factory=list)
+    numbers: list[int] = field(default_factory=list)
+    late: list[int] = field(default_factory=list)
+    overflowed: list[int] = field(default_factory=list)
 
     def add(
         self,
@@ -104,8 +120,10 @@ class NatNetTruth:
         sent_ns: int = 0,
         due_ns: int = 0,
         ticks: int = 0,
+        number: int | None = None,
     ) -> None:
         self.frames.append(frame)
+        self.numbers.append(frame if number is None else number)
         self.times.append(t_s)
         self.markers.append(np.array(x_mm, dtype=np.float64))
         self.sent_ns.append(sent_ns)
@@ -116,7 +134,10 @@ class NatNetTruth:
         """Write ``time_s`` (F,), ``markers_mm`` (F, M, 3), ``labels`` (M,), ``frame`` (F,),
         ``dropped`` (frame numbers not sent), ``sent_ns`` (F,: ``time.monotonic_ns()`` when
         the frame was sent), ``due_ns`` (F,: when the server's clock reached the frame, on
-        the same clock) and ``ticks`` (F,: its mid-exposure stamp, server clock ticks)."""
+        the same clock), ``ticks`` (F,: its mid-exposure stamp, server clock ticks),
+        ``number`` (F,: the frame number sent, ``frame`` until a ``restart``), ``late``
+        (frames a ``late`` fault held back) and ``overflowed`` (frames a ``slow`` fault
+        lost in the client's socket)."""
         m = len(self.labels)
         x = np.stack(self.markers) if self.markers else np.zeros((0, m, 3))
         np.savez(
@@ -129,6 +150,9 @@ class NatNetTruth:
             sent_ns=np.asarray(self.sent_ns, dtype=np.int64),
             due_ns=np.asarray(self.due_ns, dtype=np.int64),
             ticks=np.asarray(self.ticks, dtype=np.int64),
+            number=np.asarray(self.numbers, dtype=np.int64),
+            late=np.asarray(self.late, dtype=np.int64),
+            overflowed=np.asarray(self.overflowed, dtype=np.int64),
         )
 
 
@@ -207,6 +231,8 @@ class NatNetServer:
         self._start_s = 0.0
         self._anchor_s: float | None = None
         self._next = 0
+        self._held: list[tuple[bytes, int]] = []
+        self._hold_until = 0
         self._modeldef = nw.model_definitions(
             version, "walker", scene.labels, scene.rigid_bodies(), scene.cameras()
         )
@@ -249,18 +275,34 @@ class NatNetServer:
             f.kind == "disconnect" and f.at_s <= t < f.at_s + f.duration_s for f in self.faults
         )
 
-    def _dropped(self, k: int) -> bool:
-        """Whether frame ``k`` is one of a drop's: the first frame due at or after the
-        drop's time and the ``n - 1`` after it."""
-        if self._anchor_s is None:
-            return False
+    def _first(self, f: NatNetFault) -> int:
+        """The first frame due at or after fault ``f``'s time (after the anchor)."""
+        assert self._anchor_s is not None
         rate = self.scene.rate_hz
+        return math.ceil((self._anchor_s - self._start_s + f.at_s) * rate - 1e-9)
+
+    def _hit(self, k: int, kind: str) -> NatNetFault | None:
+        """The fault of ``kind`` whose frames (its first and the ``n - 1`` after) hold
+        frame ``k``, if any."""
+        if self._anchor_s is None:
+            return None
         for f in self.faults:
-            if f.kind == "drop":
-                first = math.ceil((self._anchor_s - self._start_s + f.at_s) * rate - 1e-9)
-                if first <= k < first + f.n:
-                    return True
-        return False
+            if f.kind == kind and self._first(f) <= k < self._first(f) + f.n:
+                return f
+        return None
+
+    def _dropped(self, k: int) -> bool:
+        """Whether frame ``k`` is one of a drop's."""
+        return self._hit(k, "drop") is not None
+
+    def _number(self, k: int) -> int:
+        """Motive's frame number of frame ``k``: from 0 again after each restart."""
+        base = 0
+        if self._anchor_s is not None:
+            for f in self.faults:
+                if f.kind == "restart" and self._first(f) <= k:
+                    base = max(base, self._first(f))
+        return k - base
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -316,6 +358,7 @@ class NatNetServer:
                 del self.clients[addr]
         if not self.clients and not self.multicast:
             return
+        self._release(k)
         t = float(self.scene.time_s(k))
         if self._silent(now):
             return
@@ -323,12 +366,22 @@ class NatNetServer:
             if self.truth is not None:
                 self.truth.dropped.append(k)
             return
+        if self._hit(k, "slow") is not None:
+            if self.truth is not None:
+                self.truth.overflowed.append(k)
+            return
+        late = self._hit(k, "late")
+        if late is not None:
+            release = self._first(late) + late.n - 1 + max(1, round(LATE_S * self.scene.rate_hz))
+            self._hold_until = max(self._hold_until, release)
+            if self.truth is not None:
+                self.truth.late.append(k)
         x = self.scene.markers_mm(np.array([t]))[0]
         clock_s = self.clock_offset_s + t  # the server's clock at frame k: k / rate after start
         tc, sub = nw.timecode(clock_s)
         mid = round(clock_s * CLOCK_HZ)
         content = nw.FrameContent(
-            frame_number=k,
+            frame_number=self._number(k),
             marker_set="walker",
             markers_m=x / 1000.0,
             labelled_ids=[MODEL_ID << 16 | (i + 1) for i in range(x.shape[0])],
@@ -339,14 +392,31 @@ class NatNetServer:
             rigid_bodies=self.scene.poses(x),
         )
         pkt = nw.frame_of_data(self.version, content)
-        targets = [(MULTICAST_GROUP, self.data_port)] if self.multicast else list(self.clients)
-        for addr in targets:
-            try:
-                self.data.sendto(pkt, addr)
-            except OSError:
-                continue
-        sent_ns = time.monotonic_ns()
         self.frames_sent += 1
+        row = -1
         if self.truth is not None:
+            row = len(self.truth.frames)
             due_ns = round((self._start_s + k / self.scene.rate_hz / self.clock_rate) * 1e9)
-            self.truth.add(k, t, x, sent_ns=sent_ns, due_ns=due_ns, ticks=mid)
+            self.truth.add(k, t, x, due_ns=due_ns, ticks=mid, number=self._number(k))
+        if k < self._hold_until:
+            self._held.append((pkt, row))
+        else:
+            self._transmit([(pkt, row)])
+
+    def _release(self, k: int) -> None:
+        """Send the frames a ``late`` fault held, once frame ``k`` is due after the hold."""
+        if self._held and k >= self._hold_until:
+            held, self._held = self._held, []
+            self._transmit(held)
+
+    def _transmit(self, packets: list[tuple[bytes, int]]) -> None:
+        """Send frames (with their truth rows, -1: none) to the group or every client."""
+        targets = [(MULTICAST_GROUP, self.data_port)] if self.multicast else list(self.clients)
+        for pkt, row in packets:
+            for addr in targets:
+                try:
+                    self.data.sendto(pkt, addr)
+                except OSError:
+                    continue
+            if self.truth is not None and row >= 0:
+                self.truth.sent_ns[row] = time.monotonic_ns()

@@ -10,10 +10,19 @@ choice; ``GetCurrentFrame``, ``GetParameters``, ``GetState``, ``Version``,
 ``QTMVersion``, ``ByteOrder``, ``TakeControl``/``ReleaseControl`` (with an
 optional password) and ``Start``/``Stop`` are answered as the spec says.
 
-Faults (``drop@T[:N]``, ``disconnect@T[:OUTAGE_S]``) are timed from the first
-``StreamFrames`` any client sends. The truth (``truth()``, or the ``.npz``
-written by :meth:`QualisysServer.stop`) holds every frame sent to at least
-one client.
+Faults are timed from the first ``StreamFrames`` any client sends:
+``drop@T[:N]`` (QTM loses N frames: numbers skip), ``disconnect@T[:OUTAGE_S]``
+(every connection closed, new ones refused for the outage), ``late@T[:N]`` (N
+frames held back and sent :data:`LATE_S` after the last of them was due, the
+frames due meanwhile behind them, as TCP keeps the order), ``restart@T`` (the
+capture stopped and started again: ``CaptureStopped``, no frames for
+:data:`RESTART_PAUSE_S`, ``CaptureStarted``, frame numbers and timestamps from 1
+and 0 again) and ``slow@T[:N]`` (the client's socket is full: the server skips
+the N frames for it, and says nothing, as QTM does; its numbers skip). A client
+that really reads too slowly gets the same: once more than :data:`SEND_LIMIT`
+bytes wait for it, its frames are skipped (``skipped`` in the truth).
+The truth (``truth()``, or the ``.npz`` written by :meth:`QualisysServer.stop`)
+holds every frame sent to at least one client.
 """
 
 from __future__ import annotations
@@ -41,7 +50,14 @@ WELCOME = "QTM RT Interface connected"
 #: take time to start; a client that waits for the event after the reply sees it).
 EVENT_DELAY_S = 0.05
 #: Fault kinds the QTM simulator injects.
-FAULT_KINDS = ("drop", "disconnect")
+FAULT_KINDS = ("drop", "disconnect", "late", "restart", "slow")
+#: Seconds a ``late`` fault holds its frames back after the last of them was due.
+LATE_S = 0.05
+#: Seconds without frames between ``CaptureStopped`` and ``CaptureStarted`` of a ``restart``.
+RESTART_PAUSE_S = 0.1
+#: Bytes waiting for a client's socket beyond which its frames are skipped (a client too
+#: slow for the stream: QTM drops its frames rather than queue them, and says nothing).
+SEND_LIMIT = 256 * 1024
 #: Width of the frame pulses of QTM's synchronisation output (published to the lab).
 SYNC_PULSE_WIDTH_S = 100e-6
 
@@ -68,12 +84,10 @@ class QualisysSimOptions:
         QualisysScene(self.markers, self.cameras, self.rate_hz, self.seed, self.clock_drift_ppm)
         if not 0 <= self.port <= 65535:
             raise ValueError(f"--port must be 0 to 65535, got {self.port}")
-        for spec in parse_schedule(self.faults):
-            if spec.kind not in FAULT_KINDS:
-                raise ValueError(
-                    f"--faults: the qualisys simulator injects {', '.join(FAULT_KINDS)}, "
-                    f"not {spec.kind!r}"
-                )
+        try:
+            parse_schedule(self.faults, FAULT_KINDS)
+        except ValueError as exc:
+            raise ValueError(f"--faults: {exc} (the qualisys simulator's kinds)") from None
 
 
 @dataclass(eq=False)
@@ -90,6 +104,9 @@ class _Truth:
     markers: list[np.ndarray] = field(default_factory=list)
     positions: list[np.ndarray] = field(default_factory=list)
     rotations: list[np.ndarray] = field(default_factory=list)
+    qtm_frames: list[int] = field(default_factory=list)
+    late: list[int] = field(default_factory=list)
+    skipped: list[int] = field(default_factory=list)
 
 
 class QualisysServer:
@@ -107,7 +124,7 @@ class QualisysServer:
         self.scene = QualisysScene(
             options.markers, options.cameras, options.rate_hz, options.seed, options.clock_drift_ppm
         )
-        self.faults = parse_schedule(options.faults)
+        self.faults = parse_schedule(options.faults, FAULT_KINDS)
         self.fault_log: list[dict[str, Any]] = []
         self.state = qw.EV_CONNECTED
         self.port = 0
@@ -118,6 +135,12 @@ class QualisysServer:
         self._anchor: float | None = None
         self._refuse_until = 0.0
         self._dropped: set[int] = set()
+        self._skipped: set[int] = set()
+        self._late_release: dict[int, int] = {}
+        self._hold_until = 0
+        self._held: list[tuple[_Client, bytes]] = []
+        self._stop_at: dict[int, int] = {}
+        self._base = 0
         self._frame = 0
         self._t0 = 0.0
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -168,16 +191,23 @@ class QualisysServer:
         self.stop()
 
     def truth(self) -> dict[str, Any]:
-        """Every frame sent to a client: ``frame`` (F,), ``time_s`` (F,), ``timestamp_us``
-        (F,), ``markers_mm`` (F, M, 3), ``labels`` (M,), ``body_names`` (B,),
-        ``body_positions_mm`` (F, B, 3), ``body_rotations`` (F, B, 3, 3) (body to world)."""
+        """Every frame sent to a client: ``frame`` (F,: the server's tick, from 1, which is
+        QTM's frame number until a ``restart``), ``qtm_frame`` (F,: the number sent),
+        ``time_s`` (F,), ``timestamp_us`` (F,: as sent), ``markers_mm`` (F, M, 3), ``labels``
+        (M,), ``body_names`` (B,), ``body_positions_mm`` (F, B, 3), ``body_rotations``
+        (F, B, 3, 3) (body to world), ``late`` (ticks of the frames a ``late`` fault held
+        back) and ``skipped`` (ticks a ``slow`` fault did not send)."""
         t = self._truth
         frames = np.asarray(t.frames, dtype=np.int64)
+        qtm = np.asarray(t.qtm_frames, dtype=np.int64)
         f, m, b = len(frames), self.scene.n_markers, len(self.scene.body_names)
         return {
             "frame": frames,
+            "qtm_frame": qtm,
+            "late": np.asarray(t.late, dtype=np.int64),
+            "skipped": np.asarray(t.skipped, dtype=np.int64),
             "time_s": (frames - 1) / self.scene.rate_hz,
-            "timestamp_us": np.array([self.scene.timestamp_us(int(n)) for n in frames], np.int64),
+            "timestamp_us": np.array([self.scene.timestamp_us(int(n)) for n in qtm], np.int64),
             "markers_mm": np.array(t.markers).reshape(f, m, 3),
             "labels": np.array(self.scene.labels),
             "body_names": np.array(self.scene.body_names),
@@ -250,16 +280,42 @@ class QualisysServer:
 
     # -- frames ----------------------------------------------------------------------
     def _emit(self, n: int) -> None:
+        if self._held and n >= self._hold_until:
+            for client, data in self._held:
+                if client in self._clients:
+                    client.writer.write(data)
+            self._held = []
+        self._restart(n)
+        if n < self._base + 1:  # capture stopped
+            return
         takers = [c for c in self._clients if c.divisor and (n - 1) % c.divisor == 0]
         if not takers:
             return
         if n in self._dropped:
             return
-        frame = self.scene.frame(n)
-        for client in takers:
-            client.writer.write(self._data(n, frame, client.components))
         t = self._truth
+        if n in self._skipped:
+            t.skipped.append(n)
+            return
+        if n in self._late_release:
+            self._hold_until = max(self._hold_until, self._late_release[n])
+            t.late.append(n)
+        number = n - self._base
+        frame = self.scene.frame(n)
+        full = [c for c in takers if c.writer.transport.get_write_buffer_size() > SEND_LIMIT]
+        if full:
+            t.skipped.append(n)
+            takers = [c for c in takers if c not in full]
+            if not takers:
+                return
+        for client in takers:
+            data = self._data(number, frame, client.components)
+            if n < self._hold_until:
+                self._held.append((client, data))
+            else:
+                client.writer.write(data)
         t.frames.append(n)
+        t.qtm_frames.append(number)
         t.markers.append(frame.markers)
         t.positions.append(frame.body_positions)
         t.rotations.append(frame.body_rotations)
@@ -278,6 +334,14 @@ class QualisysServer:
         return qw.data_packet(self.scene.timestamp_us(n), n, parts)
 
     # -- faults ------------------------------------------------------------------------
+    def _restart(self, n: int) -> None:
+        """A ``restart`` due at tick ``n``: stop the capture; start it again when due."""
+        if n in self._stop_at:
+            self._base = self._stop_at[n] - 1  # the restarted capture's frame 1
+            self._broadcast_event(qw.EV_CAPTURE_STOPPED)
+        elif n == self._base + 1 and self._base and self.state == qw.EV_CAPTURE_STOPPED:
+            self._broadcast_event(qw.EV_CAPTURE_STARTED)
+
     def _anchor_faults(self) -> None:
         if self._anchor is not None:
             return
@@ -289,6 +353,20 @@ class QualisysServer:
                 count = round(spec.arg or 1)
                 self._dropped.update(range(at, at + count))
                 self.fault_log.append({"kind": "drop", "at_s": spec.at_s, "frames": [at, count]})
+            elif spec.kind in ("late", "slow"):
+                at = first + round(spec.at_s * self.scene.rate_hz)
+                count = round(spec.arg or 1)
+                if spec.kind == "slow":
+                    self._skipped.update(range(at, at + count))
+                else:
+                    release = at + count - 1 + max(1, round(LATE_S * self.scene.rate_hz))
+                    self._late_release.update({k: release for k in range(at, at + count)})
+                self.fault_log.append({"kind": spec.kind, "at_s": spec.at_s, "frames": [at, count]})
+            elif spec.kind == "restart":
+                at = first + round(spec.at_s * self.scene.rate_hz)
+                resume = at + max(1, round(RESTART_PAUSE_S * self.scene.rate_hz))
+                self._stop_at[at] = resume
+                self.fault_log.append({"kind": "restart", "at_s": spec.at_s, "frames": [at]})
 
     def _timed_faults(self) -> None:
         if self._anchor is None:

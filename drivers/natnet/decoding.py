@@ -4,7 +4,9 @@ The driver journals every datagram it receives as it arrived; a packet's header
 (u16 id, u16 size) makes the journal self-delimiting, so the decoder cuts packets
 out of any split of the bytes. Frames (``NAT_FRAMEOFDATA``) of the recorded
 marker set become rows of a ``point3d`` block: one sensor, the set's markers in
-the model description's order, x, y, z in mm. ``seq`` is the NatNet frame number,
+the model description's order, x, y, z in mm. ``seq`` is the NatNet frame number
+(after Motive's numbers went back, as when a take restarts, plus an offset that
+makes it go on after the last ``seq``: one gap, the frames kept),
 ``ticks`` the camera mid-exposure stamp (ticks of the server's high-resolution
 clock; the timestamp in µs before NatNet 3), ``status`` the frame params. Server
 info and model descriptions in the stream are skipped (the metadata holds them).
@@ -34,6 +36,9 @@ from spotlab.drivers.natnet.wire import (
 
 #: What ``spotlab.drivers.natnet`` writes as ``layout`` in a recording's metadata.
 LAYOUT = "natnet-datagrams"
+#: A frame number at most this far behind the last one is a stale datagram (dropped as a
+#: duplicate); further back, Motive started counting again (a restart: frames kept).
+REORDER_WINDOW = 10
 
 
 class NatNetDecoder:
@@ -70,6 +75,10 @@ class NatNetDecoder:
         self.stats = stats if stats is not None else LinkStats()
         self._buf = bytearray()
         self._last: int | None = None
+        self._last_seq = -1
+        self._offset = 0
+        #: Times Motive's frame numbers went back (a take restarted), frames kept.
+        self.restarts = 0
         #: The last frame decoded (its rigid bodies, labelled markers, timecode).
         self.last_frame: FrameOfData | None = None
         self.keep_bodies = keep_bodies
@@ -80,6 +89,7 @@ class NatNetDecoder:
         """Decode the complete packets in ``data`` after what is buffered."""
         self._buf += data
         rows: list[FrameOfData] = []
+        seqs: list[int] = []
         while len(self._buf) >= HEADER.size:
             message_id, size = HEADER.unpack_from(self._buf)
             if message_id not in MESSAGE_IDS:
@@ -98,25 +108,36 @@ class NatNetDecoder:
             except NatNetFormatError:
                 self.stats.crc_errors += 1
                 continue
-            if self._accept(frame.frame_number):
+            seq = self._accept(frame.frame_number)
+            if seq is not None:
                 rows.append(frame)
+                seqs.append(seq)
                 if self.keep_bodies:
                     self.bodies.append((frame.frame_number, frame.rigid_bodies))
-        return self._block(rows, arrival_ns)
+        return self._block(rows, seqs, arrival_ns)
 
-    def _accept(self, number: int) -> bool:
+    def _accept(self, number: int) -> int | None:
+        """The ``seq`` of frame ``number``, or None for a repeat; counts losses and
+        restarts."""
         last = self._last
-        if last is not None and number <= last:
-            self.stats.duplicates += 1
-            return False
-        if last is not None and number > last + 1:
+        if last is not None and last - REORDER_WINDOW <= number <= last:
+            self.stats.duplicates += 1  # a repeat, or a datagram overtaken: dropped
+            return None
+        if last is not None and number < last:  # Motive started counting again
+            self.restarts += 1
+            self.stats.gaps += 1
+            self._offset = self._last_seq + 1 - number
+        elif last is None and number + self._offset <= self._last_seq:
+            self._offset = self._last_seq + 1 - number  # after a break: go on after it
+        elif last is not None and number > last + 1:
             self.stats.lost_frames += number - last - 1
             self.stats.gaps += 1
         self._last = number
+        self._last_seq = number + self._offset
         self.stats.frames += 1
-        return True
+        return self._last_seq
 
-    def _block(self, rows: list[FrameOfData], arrival_ns: int) -> FrameBlock:
+    def _block(self, rows: list[FrameOfData], seqs: list[int], arrival_ns: int) -> FrameBlock:
         m = len(self.labels)
         if not rows:
             return FrameBlock.empty(m, 1, 3)
@@ -132,7 +153,7 @@ class NatNetDecoder:
         else:
             ticks = [round(f.timestamp_s * 1e6) for f in rows]
         return FrameBlock(
-            seq=np.asarray([f.frame_number for f in rows], dtype=np.int64),
+            seq=np.asarray(seqs, dtype=np.int64),
             ticks=np.asarray(ticks, dtype=np.int64),
             arrival_ns=np.full(n, arrival_ns, dtype=np.int64),
             data=data,
@@ -146,6 +167,7 @@ class NatNetDecoder:
             "natnet_version": f"{self.version[0]}.{self.version[1]}",
             "marker_set": self.marker_set,
             "labels": list(self.labels),
+            "restarts": self.restarts,
         }
 
     def mark_discontinuity(self) -> None:

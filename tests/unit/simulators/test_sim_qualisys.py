@@ -330,3 +330,37 @@ def test_clock_drift_and_sync_output_in_the_lab(tmp_path: Path) -> None:
     np.testing.assert_allclose([p.world_ns - t0 for p in rises], k * 5e6, atol=1e3)
     with pytest.raises(ValueError, match="clock-drift-ppm"):
         QualisysSimOptions(clock_drift_ppm=2e4).validate()
+
+
+def test_late_restart_and_slow_faults(tmp_path: Path) -> None:
+    options = QualisysSimOptions(
+        markers=4, rate_hz=200.0, faults="late@0.1:3,slow@0.2:4,restart@0.3,disconnect@0.5:0.2"
+    )
+    with QualisysServer(options) as server:
+        peer = Peer(server.port)
+        peer.text()
+        peer.send("StreamFrames AllFrames 3D")
+        got: list[tuple[int, float]] = []  # (frame number, arrival s)
+        events: list[tuple[int, int]] = []  # (event, frames received before it)
+        with pytest.raises(ConnectionError):
+            while True:
+                kind, body = peer.packet()
+                if kind == qw.DATA:
+                    got.append((_data(body)[1], time.monotonic()))
+                elif kind == qw.EVENT:
+                    events.append((body[0], len(got)))
+        peer.close()
+    numbers = [n for n, _ in got]
+    assert [e for e, _ in events] == [
+        qw.EV_CAPTURE_STOPPED, qw.EV_CAPTURE_STARTED, qw.EV_CONNECTION_CLOSED
+    ]  # fmt: skip
+    restart = events[1][1]
+    assert numbers[restart] == 1 and numbers[restart - 1] > 50, "numbers from 1 again"
+    before = np.diff(numbers[:restart])
+    assert sorted(set(before.tolist())) == [1, 5], "the slow client's 4 frames skipped"
+    truth = server.truth()
+    assert len(truth["late"]) == 3 and len(truth["skipped"]) == 4
+    first_late = numbers.index(int(truth["late"][0]))
+    held = got[first_late][1] - got[first_late - 1][1]
+    assert held >= 0.04, held  # held back 50 ms after the last late frame was due
+    assert [e["kind"] for e in server.fault_log] == ["late", "slow", "restart", "disconnect"]

@@ -19,7 +19,8 @@ from spotlab.simulators.qualisys import QualisysServer, QualisysSimOptions
 def add_qualisys_arguments(p: Any) -> None:
     """The options only ``spotlab sim qualisys`` takes."""
     g = p.add_argument_group("qualisys (QTM real-time server; also --cameras, --markers, "
-                             "--rate, --seed, --faults drop@T[:N],disconnect@T[:S], "
+                             "--rate, --seed, --faults drop@T[:N],disconnect@T[:S],late@T[:N],"
+                             "restart@T,slow@T[:N], "
                              "--clock-drift-ppm PPM (QTM's timestamps run fast), "
                              "--lab DIR --lab-name NAME (frame pulses of QTM's sync output), "
                              "--truth T.npz, --seconds)")  # fmt: skip
