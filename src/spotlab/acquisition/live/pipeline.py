@@ -32,6 +32,7 @@ from spotlab.acquisition.live.latency import LatencyStats, LatencySummary
 from spotlab.acquisition.live.matching import FrameMatcher
 from spotlab.acquisition.live.readings import pixels
 from spotlab.acquisition.live.results import LiveFrame
+from spotlab.acquisition.lsl.outlet import marker_spec
 from spotlab.acquisition.synchroniser import sample_offsets
 from spotlab.core.errors import ConfigurationError, SpotlabError
 from spotlab.core.failures import FailureTally
@@ -324,17 +325,7 @@ class LivePipeline(SinkBase):
 
     def _tell_consumers(self, n_markers: int, rate_hz: float) -> None:
         """Call ``on_configure(spec)`` of the consumers that have it: the output's spec."""
-        spec = StreamSpec(
-            name=self.name,
-            kind="point3d",
-            n_sensors=1,
-            n_markers=n_markers,
-            rate_hz=rate_hz,
-            tick_hz=1e9,
-            values=("x", "y", "z"),
-            units=("mm", "mm", "mm"),
-            metadata={"marker_labels": list(self.labels)},
-        )
+        spec = marker_spec(n_markers, rate_hz, self.name, self.labels)
         for consumer in self.consumers:
             hook = getattr(consumer, "on_configure", None)
             if callable(hook):
