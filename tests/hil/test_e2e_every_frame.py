@@ -10,6 +10,9 @@ import pytest
 from _e2e import RATE_HZ, decode, events, info, match_to_truth, record_args, run_cli, sim_pty
 
 
+# make long: make test keeps to 10 minutes on 2 cores (every frame through a pty is
+# also checked by the timer, centroid, lab and fault-matrix runs).
+@pytest.mark.long
 @pytest.mark.slow
 @pytest.mark.timeout(120)
 def test_ten_seconds_through_a_real_pty_lose_no_frame(tmp_path: Path) -> None:
