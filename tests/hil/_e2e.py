@@ -173,6 +173,25 @@ def _first_line(path: Path, proc: subprocess.Popen[bytes], err: Path, timeout: f
     )
 
 
+def record_simulator(
+    folder: Path, sim_args: Sequence[object], family: str, seconds: float, out: Path
+) -> subprocess.CompletedProcess[str]:
+    """``spotlab sim SIM_ARGS`` as its own process, recorded by ``spotlab record --device
+    FAMILY=ADDRESS --seconds S --out OUT --json`` (the address its first line names),
+    then stopped; the simulator must exit cleanly. Returns the recording's result."""
+    out_txt, err_txt = folder / "sim.stdout", folder / "sim.stderr"
+    sim = spawn_cli(["sim", *sim_args], out_txt, err_txt)
+    try:
+        address = _first_line(out_txt, sim, err_txt, timeout=30.0)
+        result = run_cli(
+            "record", "--device", f"{family}={address}", "--seconds", seconds,
+            "--out", out, "--json", timeout=seconds + 30,
+        )  # fmt: skip
+    finally:
+        assert stop_process(sim) == 0
+    return result
+
+
 @contextmanager
 def sim_pty(
     folder: Path,

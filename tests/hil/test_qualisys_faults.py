@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _e2e import _first_line as first_line
-from _e2e import info, run_cli, spawn_cli, stop_process
+from _e2e import info, record_simulator
 
 from spotlab.acquisition.replay import replay
 from spotlab.core.frames import FrameBlock
@@ -30,20 +29,12 @@ RECORD_S = 5.0
 @pytest.mark.timeout(60)
 def test_every_qualisys_fault_counted_and_no_served_frame_lost(tmp_path: Path) -> None:
     truth_path, journal = tmp_path / "truth.npz", tmp_path / "qtm.spj"
-    out, err = tmp_path / "sim.stdout", tmp_path / "sim.stderr"
-    sim = spawn_cli(
-        ["sim", "qualisys", "--markers", 10, "--cameras", 4, "--rate", RATE_HZ,
+    result = record_simulator(
+        tmp_path,
+        ["qualisys", "--markers", 10, "--cameras", 4, "--rate", RATE_HZ,
          "--faults", SCHEDULE, "--truth", truth_path],
-        out, err,
+        "qualisys", RECORD_S, journal,
     )  # fmt: skip
-    try:
-        address = first_line(out, sim, err, timeout=30.0)
-        result = run_cli(
-            "record", "--device", f"qualisys={address}", "--seconds", RECORD_S,
-            "--out", journal, "--json", timeout=RECORD_S + 30,
-        )  # fmt: skip
-    finally:
-        assert stop_process(sim) == 0
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
     truth = dict(np.load(truth_path))
