@@ -21,6 +21,8 @@ and 0 again) and ``slow@T[:N]`` (the client's socket is full: the server skips
 the N frames for it, and says nothing, as QTM does; its numbers skip). A client
 that really reads too slowly gets the same: once more than :data:`SEND_LIMIT`
 bytes wait for it, its frames are skipped (``skipped`` in the truth).
+A client that asked for ``UDP:[ADDR:]PORT`` gets its Data packets as datagrams
+there, one packet each (what the network then loses is the client's loss).
 The truth (``truth()``, or the ``.npz`` written by :meth:`QualisysServer.stop`)
 holds every frame sent to at least one client.
 """
@@ -28,6 +30,7 @@ holds every frame sent to at least one client.
 from __future__ import annotations
 
 import asyncio
+import socket
 import threading
 import time
 from dataclasses import dataclass, field
@@ -135,6 +138,8 @@ class QualisysServer(QtmDialogue):
         self._thread: threading.Thread | None = None
         self._ready = threading.Event()
         self._error: BaseException | None = None
+        self._udp: socket.socket | None = None
+        self.udp_send_errors = 0
         self.lab: LabPublisher | None = None
 
     @property
@@ -249,6 +254,8 @@ class QualisysServer(QtmDialogue):
     async def _main(self) -> None:
         self._stopping = asyncio.Event()
         server = await asyncio.start_server(self._serve_client, "127.0.0.1", self.options.port)
+        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._udp.setblocking(False)
         self.port = int(server.sockets[0].getsockname()[1])
         t0_ns = time.monotonic_ns()
         self._t0 = t0_ns * 1e-9
@@ -263,6 +270,7 @@ class QualisysServer(QtmDialogue):
             for client in list(self._clients):
                 client.writer.close()
             await server.wait_closed()
+            self._udp.close()
 
     async def _ticker(self) -> None:
         n = 1
@@ -280,7 +288,7 @@ class QualisysServer(QtmDialogue):
         if self._held and n >= self._hold_until:
             for client, data in self._held:
                 if client in self._clients:
-                    client.writer.write(data)
+                    self._send_frame(client, data)
             self._held = []
         self._restart(n)
         if n < self._base + 1:  # capture stopped
@@ -299,7 +307,11 @@ class QualisysServer(QtmDialogue):
             t.late.append(n)
         number = n - self._base
         frame = self.scene.frame(n)
-        full = [c for c in takers if c.writer.transport.get_write_buffer_size() > SEND_LIMIT]
+        full = [
+            c
+            for c in takers
+            if c.udp is None and c.writer.transport.get_write_buffer_size() > SEND_LIMIT
+        ]
         if full:
             t.skipped.append(n)
             takers = [c for c in takers if c not in full]
@@ -310,12 +322,22 @@ class QualisysServer(QtmDialogue):
             if n < self._hold_until:
                 self._held.append((client, data))
             else:
-                client.writer.write(data)
+                self._send_frame(client, data)
         t.frames.append(n)
         t.qtm_frames.append(number)
         t.markers.append(frame.markers)
         t.positions.append(frame.body_positions)
         t.rotations.append(frame.body_rotations)
+
+    def _send_frame(self, client: Client, data: bytes) -> None:
+        """A Data packet on the client's TCP link, or as one datagram where it asked."""
+        if client.udp is None or self._udp is None:
+            client.writer.write(data)
+            return
+        try:
+            self._udp.sendto(data, client.udp)
+        except OSError:  # a full send buffer or no route: the datagram is lost
+            self.udp_send_errors += 1
 
     def _data(self, n: int, frame: SceneFrame, components: tuple[str, ...]) -> bytes:
         parts = []

@@ -32,6 +32,7 @@ class Client:
     components: tuple[str, ...] = ()
     divisor: int = 0  # 0: not streaming
     version: str = VERSIONS[-1]
+    udp: tuple[str, int] | None = None  # where Data packets go by UDP (None: the TCP link)
 
 
 class QtmDialogue:
@@ -167,11 +168,32 @@ class QtmDialogue:
         except (ValueError, ZeroDivisionError):
             self._error_reply(client, f"Parse error: {args[0]}")
             return
-        comps = self._components(client, args[1:])
+        rest = args[1:]
+        udp = None
+        if rest and rest[0].lower().startswith("udp:"):
+            udp = self._udp_target(client, rest[0])
+            if udp is None:
+                return
+            rest = rest[1:]
+        comps = self._components(client, rest)
         if comps is None:
             return
-        client.components, client.divisor = comps, divisor
+        client.components, client.divisor, client.udp = comps, divisor, udp
         self._anchor_faults()
+
+    def _udp_target(self, client: Client, arg: str) -> tuple[str, int] | None:
+        """``UDP:PORT`` (to the address the command came from) or ``UDP:ADDR:PORT``."""
+        parts = arg.split(":")[1:]
+        peer = client.writer.get_extra_info("peername")
+        host = parts[0] if len(parts) == 2 else (str(peer[0]) if peer else "127.0.0.1")
+        try:
+            port = int(parts[-1])
+        except ValueError:
+            port = -1
+        if len(parts) not in (1, 2) or not 1 <= port <= 65535 or not host:
+            self._error_reply(client, f"Parse error: {arg}")
+            return None
+        return host, port
 
     def _take_control(self, client: Client, args: list[str]) -> None:
         password = self.password

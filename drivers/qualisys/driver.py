@@ -2,7 +2,9 @@
 
 Bring-up over TCP: the server's welcome, ``Version 1.25``, ``GetParameters
 All`` (rate, labels, bodies, cameras), ``TakeControl`` when a password is
-given, then ``StreamFrames AllFrames 3D 6D``. Every byte read and written goes
+given, then ``StreamFrames AllFrames 3D 6D`` (with ``UDP:PORT`` when ``udp_port`` is
+given: the Data packets then come as UDP datagrams, :mod:`.udp`, and the TCP
+connection is read a whole packet at a time). Every byte read and written goes
 to the taps, so a recording holds QTM's packets raw; the decoder
 (:class:`QualisysDecoder`) turns them into frame blocks live and in replay.
 ``stop`` sends ``StreamFrames Stop`` then ``Version`` and decodes the stream up to
@@ -53,6 +55,7 @@ from spotlab.drivers.qualisys.protocol import (
     command_packet,
     parse_parameters,
 )
+from spotlab.drivers.qualisys.udp import UdpReceiver
 
 WELCOME = "QTM RT Interface connected"
 RETRY_S = 0.05
@@ -93,11 +96,14 @@ class QualisysDriver(Driver):
         Seconds to wait for the connection and each reply (default 3).
     reconnect_timeout : float, optional
         Seconds to keep trying after the connection is lost (default: forever).
+    udp_port : int, optional
+        Have QTM send the frames as UDP datagrams to this local port (0: a free one);
+        default: frames come on the TCP connection.
 
     Raises
     ------
     ConfigurationError
-        If the port or a timeout is invalid.
+        If the port, the UDP port or a timeout is invalid.
     """
 
     family = "qualisys"
@@ -110,6 +116,7 @@ class QualisysDriver(Driver):
         password: str | None = None,
         reply_timeout: float = 3.0,
         reconnect_timeout: float | None = None,
+        udp_port: int | None = None,
     ) -> None:
         super().__init__(port, name=name)
         self.host, self.tcp_port = parse_address(self.port)
@@ -118,6 +125,10 @@ class QualisysDriver(Driver):
         self.password = password
         self.reply_timeout = reply_timeout
         self.reconnect_timeout = reconnect_timeout
+        if udp_port is not None and not 0 <= udp_port <= 65535:
+            raise ConfigurationError(f"udp_port must be 0-65535, got {udp_port}")
+        self.udp_port = udp_port
+        self._udp: UdpReceiver | None = None
         self.parameters: QtmParameters | None = None
         self.qtm_events: list[str] = []
         self._sock: socket.socket | None = None
@@ -154,7 +165,7 @@ class QualisysDriver(Driver):
         params = self.parameters.to_dict() if self.parameters is not None else {}
         return {
             **super().metadata(),
-            "qtm": {**params, "protocol_version": PROTOCOL_VERSION},
+            "qtm": {**params, "protocol_version": PROTOCOL_VERSION, "udp_port": self.udp_port},
             "decoder": "spotlab.drivers.qualisys:decoder_from_metadata",
         }
 
@@ -174,9 +185,29 @@ class QualisysDriver(Driver):
             metadata={"marker_labels": list(params.labels), "bodies": list(params.bodies)},
         )
         self._decoder = QualisysDecoder(len(params.labels), self.stats)
+        if self.udp_port is not None:
+            self._open_udp()
         self._tap_event("started", components="3D 6D")
-        self._send("StreamFrames AllFrames 3D 6D")
+        self._send(self._stream_command())
         self._last_rx = time.monotonic()
+
+    def _open_udp(self) -> None:
+        assert self._sock is not None
+        local = str(self._sock.getsockname()[0])
+        try:
+            self._udp = UdpReceiver(local, self.udp_port or 0, self.host)
+        except OSError as exc:
+            self._sock.close()
+            self._sock = None
+            raise ConfigurationError(
+                f"cannot receive QTM's UDP stream on {local}:{self.udp_port}: {exc}"
+            ) from None
+        self._tap_event("udp", port=self._udp.port)
+
+    def _stream_command(self) -> str:
+        """``StreamFrames AllFrames [UDP:PORT] 3D 6D``."""
+        udp = f" UDP:{self._udp.port}" if self._udp is not None else ""
+        return f"StreamFrames AllFrames{udp} 3D 6D"
 
     def _stop(self) -> None:
         if self._sock is not None:
@@ -204,15 +235,35 @@ class QualisysDriver(Driver):
             if left <= 0 or not select.select([self._sock], [], [], left)[0]:
                 self._tap_event("stop_unconfirmed", reason="no reply to Version after Stop")
                 return
-            data = self._sock.recv(1 << 16)
+            data = self._tcp_bytes()
             if not data:
                 return
-            arrival = time.monotonic_ns()
-            self.stats.bytes += len(data)
-            self._tap_rx(data, arrival)
-            block = dec.feed(data, arrival)
-            if len(block):
-                self._stash.append(block)
+            self._take(data)
+        if self._udp is not None:
+            self._take(self._udp.drain())
+
+    def _tcp_bytes(self) -> bytes:
+        """What the TCP connection has: any bytes, or one whole packet when the frames
+        come by UDP (so that datagrams never land inside a TCP packet in the journal)."""
+        assert self._sock is not None
+        if self._udp is None:
+            return self._sock.recv(1 << 16)
+        head = self._read_exact(HEADER.size, "the stream")
+        size = max(HEADER.size, min(HEADER.unpack(head)[0], MAX_PACKET))
+        return head + self._read_exact(size - HEADER.size, "the stream")
+
+    def _take(self, data: bytes) -> FrameBlock | None:
+        """Tap, count and decode received bytes; frames go to the stash."""
+        if not data:
+            return None
+        assert self._decoder is not None
+        arrival = time.monotonic_ns()
+        self.stats.bytes += len(data)
+        self._tap_rx(data, arrival)
+        block = self._decoder.feed(data, arrival)
+        if len(block):
+            self._stash.append(block)
+        return block
 
     def drain(self) -> list[FrameBlock]:
         """Frames received while stopping (before QTM's reply that ends the stream),
@@ -221,6 +272,9 @@ class QualisysDriver(Driver):
         return blocks
 
     def _close(self) -> None:
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
         if self._sock is not None:
             self._sock.close()
             self._sock = None
@@ -337,26 +391,32 @@ class QualisysDriver(Driver):
                 time.sleep(min(RETRY_S, timeout if timeout is not None else RETRY_S))
                 return None
         wait = self._silence_s() if timeout is None else min(timeout, self._silence_s())
-        ready, _, _ = select.select([self._sock], [], [], wait)
+        sources: list[Any] = [self._sock] if self._udp is None else [self._sock, self._udp]
+        ready, _, _ = select.select(sources, [], [], wait)
         now = time.monotonic()
         if not ready:
             if now - self._last_rx > self._silence_s():
                 self._lose(f"no data for {now - self._last_rx:.1f} s")
             return None
-        try:
-            data = self._sock.recv(1 << 16)
-        except OSError as exc:
-            self._lose(str(exc))
-            return None
+        data = b""
+        if self._sock in ready:
+            try:
+                data = self._tcp_bytes()
+            except (OSError, DeviceError) as exc:
+                self._lose(str(exc))
+                return None
+            if not data:
+                self._lose("QTM closed the connection")
+                return None
+        if self._udp is not None and self._udp in ready:
+            data += self._udp.read_available()
         if not data:
-            self._lose("QTM closed the connection")
             return None
         self._last_rx = now
         arrival = time.monotonic_ns()
         self.stats.bytes += len(data)
         self._tap_rx(data, arrival)
-        block = self._decoder.feed(data, arrival)
-        return block
+        return self._decoder.feed(data, arrival)
 
     def _lose(self, reason: str) -> None:
         if self._sock is not None:
@@ -396,6 +456,6 @@ class QualisysDriver(Driver):
         self.stats.reconnects += 1
         self.stats.gaps += 1
         self._tap_event("reconnected", outage_s=round(time.monotonic() - lost, 3))
-        self._send("StreamFrames AllFrames 3D 6D")
+        self._send(self._stream_command())
         self._last_rx = time.monotonic()
         self._lost_at = None

@@ -67,7 +67,10 @@ FAMILY_SETTINGS: dict[str, dict[str, tuple[str, Converter, str]]] = {
         "blobs": ("max_blobs", _int, "blobs per camera and frame at most"),
         "baud": ("baud", _baud, "line rate while streaming, or 'auto'"),
     },
-    "qualisys": {"password": ("password", str, "QTM's real-time password (TakeControl)")},
+    "qualisys": {
+        "password": ("password", str, "QTM's real-time password (TakeControl)"),
+        "udp": ("udp_port", _int, "have QTM send the frames by UDP to this local port (0: any)"),
+    },
     "natnet": {
         "marker_set": ("marker_set", str, "marker set to record (default: the first)"),
         "multicast": (

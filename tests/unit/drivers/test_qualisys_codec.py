@@ -12,6 +12,7 @@ from spotlab.core.errors import ConfigurationError, ProtocolError
 from spotlab.drivers.qualisys import (
     PacketSplitter,
     QualisysDecoder,
+    QualisysDriver,
     bodies_6d_from,
     command_packet,
     markers_2d_from,
@@ -22,6 +23,7 @@ from spotlab.drivers.qualisys import (
     parse_parameters,
 )
 from spotlab.drivers.qualisys.protocol import COMMAND, DATA, ERROR, EVENT, NO_MORE_DATA, XML
+from spotlab.drivers.qualisys.udp import UdpReceiver
 from spotlab.testing.golden import golden_vector
 
 SPEC = Path(__file__).parents[3] / "docs" / "protocols" / "qualisys.md"
@@ -36,6 +38,16 @@ def test_commands_are_the_golden_bytes() -> None:
     assert command_packet("Version 1.25") == golden("G1")
     assert command_packet("GetParameters 3D") == golden("G4")
     assert command_packet("StreamFrames AllFrames 3D 6D") == golden("G11")
+
+
+def test_udp_stream_command_is_the_golden_bytes() -> None:
+    driver = QualisysDriver("127.0.0.1:1", udp_port=7777)
+    driver._udp = UdpReceiver("127.0.0.1", 0, "127.0.0.1")
+    driver._udp.port = 7777  # as if bound there
+    try:
+        assert command_packet(driver._stream_command()) == golden("G12")
+    finally:
+        driver._udp.close()
 
 
 def test_splitter_cuts_every_golden_reply_from_any_split() -> None:

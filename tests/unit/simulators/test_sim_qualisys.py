@@ -53,6 +53,20 @@ def test_golden_commands_are_read_from_any_split() -> None:
     ]
 
 
+def test_golden_udp_stream_command_sends_datagrams_there() -> None:
+    """G12 asks for the frames by UDP at port 7777 of the address the command came from."""
+    with QualisysServer(QualisysSimOptions(markers=4, rate_hz=100.0)) as server:
+        peer = Peer(server.port)
+        peer.packet()  # the welcome
+        peer.sock.sendall(golden("G12"))
+        t_end = time.monotonic() + 2.0
+        while not any(c.divisor for c in server._clients) and time.monotonic() < t_end:
+            time.sleep(0.01)
+        (client,) = server._clients
+        assert client.udp == ("127.0.0.1", 7777) and client.components == ("3d", "6d")
+        peer.sock.close()
+
+
 def test_6d_rotation_is_sent_column_by_column() -> None:
     r = np.arange(9.0).reshape(1, 3, 3)
     body = qw.component_6d(np.zeros((1, 3)), r)

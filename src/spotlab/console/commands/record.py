@@ -52,7 +52,7 @@ def add_parser(sub: Any) -> None:
         metavar="FAMILY=PORT[,key=value...]",
         help="a device to record, with its own settings (selspot: rate, cameras, leds, slot, "
         "bgnd, agc, baud; timer: rate, slots, baud; centroid: rate, cameras, exposure, "
-        "threshold, blobs, baud; qualisys: password; any: name); repeat for several devices",
+        "threshold, blobs, baud; qualisys: password, udp; any: name); repeat for several devices",
     )
     p.add_argument(
         "--lab",
