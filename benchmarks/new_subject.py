@@ -10,7 +10,10 @@ a recording of ``spotlab sim centroid`` holds, decoded by the host driver):
 2. the same subject's ROM trial (``--motion rom``, ``--rom`` s), its first frame
    labelled by fitting the subject's static pose, then identified with M0
    (``label_trial``); the final model learnt from it (``learn_model``);
-3. the same subject's walk (``--walk`` s) identified with the final model, cold.
+3. the same subject's walk (``--walk`` s) identified with the final model, cold:
+   forward only, as live labelling does (``walk_*``), and forward and backward joined,
+   as ``spotlab reconstruct`` does (``walk_both_ways_*``, with ``filled_backward`` and
+   ``label_conflicts``: :mod:`spotlab.processing.identification_passes`).
 
 The simulator's truth is read only at the end, to score: ``static_wrong`` (static points
 labelled farther than 10 mm from their marker), ``rom_right``/``walk_right`` (marker-
@@ -31,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from spotlab.processing.identification_passes import identify_both_ways
 from spotlab.reconstruction.identification import BlobFrame, RigGeometry
 from spotlab.reconstruction.identification.static_cloud import static_cloud
 from spotlab.reconstruction.identification.subject_model import (
@@ -70,6 +74,11 @@ def run(seed: int, static_s: float, rom_s: float, walk_s: float, rate: float) ->
     final = learn_model(m0, labelled)
     walk = centroid_scene(walk_s, rate, seed=seed)
     walked, _ = label_trial(walk.rig, _frames(walk), final)
+    # offline, as spotlab reconstruct labels: forward and backward, joined
+    frames = list(_frames(walk))
+    usable = np.ones(len(frames), dtype=bool)
+    numbers = np.arange(len(frames))
+    joined, counts = identify_both_ways(walk.rig, final, frames, usable, numbers)
     # scoring, with the simulator's truth, only now
     truth = np.nanmedian(static.markers_mm, axis=0)
     marker = np.array([static.labels.index(x) for x in body.labels])
@@ -79,6 +88,7 @@ def run(seed: int, static_s: float, rom_s: float, walk_s: float, rate: float) ->
     )
     rom_right, rom_wrong = _score(labelled, rom, m0.labels)
     walk_right, walk_wrong = _score(walked, walk, final.labels)
+    both_right, both_wrong = _score(joined.points, walk, final.labels)
     cover = np.isfinite(walked[..., 0]).mean(axis=0)
     least = {final.labels[m]: round(float(cover[m]), 2) for m in np.argsort(cover)[:6]}
     return {
@@ -88,6 +98,8 @@ def run(seed: int, static_s: float, rom_s: float, walk_s: float, rate: float) ->
         "rom_start_rms_mm": None if start is None else round(start.rms_mm, 1),
         "rom_right": round(rom_right, 4), "rom_wrong": round(rom_wrong, 5),
         "walk_right": round(walk_right, 4), "walk_wrong": round(walk_wrong, 5),
+        "walk_both_ways_right": round(both_right, 4),
+        "walk_both_ways_wrong": round(both_wrong, 5), **counts,
         "walk_least_covered": least,
         "seconds": round(time.perf_counter() - t0, 1),
     }  # fmt: skip

@@ -41,6 +41,16 @@ def _children() -> set[int]:
     return kids
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """With pytest-xdist (``make test`` runs two workers, ``--dist loadgroup``), the
+    end-to-end tests, whose simulators run in real time, go to one worker one after
+    another, so that two of them never share the machine's two cores; the other tests
+    share both workers."""
+    for item in items:
+        if item.nodeid.startswith("tests/hil/"):
+            item.add_marker(pytest.mark.xdist_group("real-time"))
+
+
 @pytest.fixture(autouse=True)
 def no_leaks() -> Iterator[None]:
     """Fail a test that leaves a thread, a child process or an open port behind."""

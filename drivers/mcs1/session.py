@@ -35,7 +35,7 @@ from spotlab.drivers.mcs1.commands import (
     encode_command,
     parse_reply,
 )
-from spotlab.drivers.mcs1.link import SerialLink
+from spotlab.drivers.mcs1.link import MAX_LINE, SerialLink
 
 log = logging.getLogger(__name__)
 
@@ -186,6 +186,9 @@ class CommandChannel:
     ) -> Reply:
         """Read the reply to ``command``, skipping lines that fail their CRC.
 
+        A reply that has begun but not ended when the time runs out gets the same time
+        again, once, to end (a device or a host slowed down by other work).
+
         Parameters
         ----------
         command : str
@@ -213,9 +216,18 @@ class CommandChannel:
         wait = self.reply_timeout if timeout is None else timeout
         deadline = time.monotonic() + wait
         damaged: list[bytes] = []
+        pending = b""  # a line under way when the time ran out
+        grace = True
         while True:
             line, _ = self.link.read_line(deadline)
             self.stats.bytes += len(line)
+            line, pending = pending + line, b""
+            if grace and line and not line.endswith(b"\r") and len(line) < MAX_LINE:
+                # The reply had begun when the time ran out (the device, or this host,
+                # slowed down): the line gets one more period to end, once.
+                grace = False
+                pending, deadline = line, time.monotonic() + wait
+                continue
             if line.endswith(b"\r"):
                 reply = find_reply(line)
                 if reply is not None:

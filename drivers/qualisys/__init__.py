@@ -1,4 +1,4 @@
-"""Qualisys QTM real-time servers as devices: labelled 3-D markers over TCP (frames by UDP on request).
+"""Qualisys QTM real-time servers as devices: labelled 3-D markers over TCP (or UDP).
 
 The protocol is Qualisys' (docs/protocols/qualisys.md, version 1.25,
 little-endian); :mod:`~spotlab.drivers.qualisys.protocol` reads its packets,

@@ -278,12 +278,13 @@ def test_a_new_subject_is_labelled_from_a_template_through_to_c3d(
     print("wrong:", {names[m]: int(n) for m, n in enumerate(wrong.sum(axis=0)) if n})
     print("least covered:", {names[m]: round(float(right[decoded][:, m].mean()), 3)
                              for m in np.argsort(right[decoded].mean(axis=0))[:5]})  # fmt: skip
-    # Targets (issue 11): >= 99.5 % right, <= 0.05 % wrong, >= 97 % coverage. Measured
-    # through this test: 100 % right, 0 wrong, 97.76-98.08 % coverage (feet and wrists the
-    # least covered, 76-92 %); in process on subjects 5-8 (benchmarks/new_subject.py)
-    # 97.45-98.91 %, 0 wrong. The coverage bound leaves 1.5 points for the walk's window.
+    # Targets (issue 11): >= 99.5 % right, <= 0.05 % wrong, >= 97 % coverage. Forward
+    # only (as live labelling does), this test measured 94.9-98.1 % coverage: a foot or a
+    # wrist unlabelled until its cluster is recognised, sooner or later with the walk's
+    # window. reconstruct labels backward too; in process on 22 windows of the walks of
+    # subjects 5 and 6 (docs/identification.md) that gave 99.91-100 %, 0 wrong.
     assert score["wrong_of_reported"] <= 0.0005 and score["right_of_reported"] >= 0.995
-    assert score["coverage"] >= 0.965 and decoded.sum() >= 0.8 * WALK_S * 100
+    assert score["coverage"] >= 0.99 and decoded.sum() >= 0.8 * WALK_S * 100
 
 
 @pytest.mark.timeout(180)

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from spotlab.processing.blob_trajectories import MAX_LOST_FRAMES
+from spotlab.processing.identification_passes import MAX_LOST_FRAMES
 
 __all__ = ["print_blob_summary", "print_summary"]
 
@@ -47,6 +47,11 @@ def print_blob_summary(summary: dict[str, Any], outputs: list[Path]) -> None:
         f"samples ({summary['markers_reconstructed']} markers seen, "
         f"{summary['marker_gaps']} gaps)"
     )
+    if summary.get("filled_backward") or summary.get("label_conflicts"):
+        print(
+            f"  backward pass      filled {summary['filled_backward']} marker samples, "
+            f"dropped {summary['label_conflicts']} where the passes disagreed"
+        )
     print(
         f"  rejected           {summary['ghosts_rejected']} reflection points, "
         f"{summary['unlabelled_per_frame']:g} unlabelled points per frame"

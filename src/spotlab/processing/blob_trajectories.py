@@ -14,7 +14,9 @@ Frames are placed on the hub's frame grid by their camera frame counters (trigge
 since ``START:``, the numbering of the simulator's truth ``frame_no``): the trial starts
 at the first recorded frame (C3D ``first_frame`` = its number + 1, C3D counting from 1)
 and a frame lost on the link stays a gap (NaN) in its place. Marker positions are NaN
-where a marker was not labelled: a flagged gap, never a guess.
+where a marker was not labelled: a flagged gap, never a guess. The recording is
+identified forward and backward in time and the two joined
+(:mod:`spotlab.processing.identification_passes`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.acquisition.replay import replay
-from spotlab.core.errors import CalibrationError, ReconstructionError, RecordingError
+from spotlab.core.errors import ReconstructionError, RecordingError
 from spotlab.core.frames import FrameBlock
 from spotlab.core.wire import StreamDecoder
 from spotlab.drivers.centroid import BLOB_MERGED, BlobFrames, blobs_from_blocks
@@ -39,14 +41,12 @@ from spotlab.io import Trial
 from spotlab.io.journal import JournalReader
 from spotlab.processing.decoding import decoder_for, input_suffix
 from spotlab.processing.errors import InputError
-from spotlab.processing.progress import ProgressSink
-from spotlab.reconstruction.identification import (
-    FLOODED,
-    NO_BLOBS,
-    BlobFrame,
-    Identifier,
-    MarkerModel,
+from spotlab.processing.identification_passes import (
+    identify_both_ways,
+    identify_pass,
 )
+from spotlab.processing.progress import ProgressSink
+from spotlab.reconstruction.identification import BlobFrame, Identifier, MarkerModel
 
 __all__ = [
     "BLOB_KIND",
@@ -66,8 +66,6 @@ FloatArray = NDArray[np.float64]
 BLOB_KIND = "blobs2d"
 #: Session metadata key under which ``spotlab record --model`` stores the marker model.
 MODEL_KEY = "marker_model"
-#: Lost frames (in a row) the identification goes on over; after more it starts afresh.
-MAX_LOST_FRAMES = 1
 
 
 @dataclass
@@ -288,6 +286,7 @@ def identify_recording(
     *,
     rate_hz: float | None = None,
     progress: ProgressSink | None = None,
+    both_directions: bool = True,
 ) -> BlobTrajectories:
     """Label the markers of every frame of ``recording``.
 
@@ -302,6 +301,10 @@ def identify_recording(
         Frame rate; overrides the recording's.
     progress : ProgressSink, optional
         Told every few hundred frames.
+    both_directions : bool
+        Identify backward in time too and fill what the forward pass left empty
+        (:func:`~spotlab.processing.identification_passes.identify_both_ways`); False:
+        forward only, as the live path labels.
 
     Returns
     -------
@@ -313,7 +316,9 @@ def identify_recording(
         ``ghosts_rejected`` (reflection points), ``unlabelled_per_frame``,
         ``marker_gaps`` (gaps inside each marker's trajectory, summed),
         ``identification_restarts`` (gaps of more than ``MAX_LOST_FRAMES`` lost frames,
-        after which identification starts afresh) and per camera the
+        after which identification starts afresh), ``filled_backward`` and
+        ``label_conflicts`` (marker-frames the backward pass added, and dropped because
+        the two passes disagreed), and per camera the
         frames it was ``offline``, ``overflow``, ``flooded`` (too many blobs) or had
         ``no_blobs``.
 
@@ -334,42 +339,29 @@ def identify_recording(
     if not (np.isfinite(rate) and rate > 0):
         raise InputError(f"the frame rate must be a positive number of Hz, not {rate:g}")
     try:
-        identify = Identifier(rig, model)
+        Identifier(rig, model)
     except ReconstructionError as exc:
         raise InputError(str(exc)) from None
     M = len(model.labels)
     first = int(recording.frame_no[0])
     row = recording.frame_no - first
-    points = np.full((int(row[-1]) + 1, M, 3), np.nan)
-    residual = np.full((F, M), np.nan)
-    flagged = {"flooded": np.zeros(C, np.int64), "no_blobs": np.zeros(C, np.int64)}
-    ghosts = unlabelled = restarts = 0
-    last = int(row[0]) - 1  # grid row of the last frame identified
-    counts = blobs.counts
-    for f, (frame, unusable) in enumerate(_frames(blobs)):
-        if not counts[f][~unusable].any():
-            continue  # no usable blob: a gap, like a lost frame
-        if int(row[f]) - last - 1 > MAX_LOST_FRAMES and last >= int(row[0]):
-            # The identifier takes its frames as consecutive: after more lost frames than
-            # its prediction bears, it starts afresh and labels are earned again from the
-            # clusters (a gap, never a label carried over a guess).
-            identify = Identifier(rig, model)
-            restarts += 1
-        last = int(row[f])
-        try:
-            result = identify(frame, unusable)
-        except CalibrationError as exc:
-            raise InputError(f"frame {int(recording.frame_no[f])}: {exc}") from None
-        points[row[f]] = result.points
-        residual[f] = result.residual_px
-        ghosts += result.ghosts
-        unlabelled += result.unlabelled
-        flagged["flooded"] += (result.camera_flags & FLOODED) != 0
-        flagged["no_blobs"] += (result.camera_flags & NO_BLOBS) != 0
-        if progress is not None and f % 256 == 0:
-            progress.update(f, f"{f} of {F} frames")
+    frames = list(_frames(blobs))
+    # A frame with no usable blob is a gap, like a lost frame.
+    usable = np.array([blobs.counts[f][~frames[f][1]].any() for f in range(F)], dtype=bool)
+    counts: dict[str, int] = {}
+    if both_directions:
+        result, counts = identify_both_ways(
+            rig, model, frames, usable, recording.frame_no, progress
+        )
+    else:
+        result = identify_pass(rig, model, frames, usable, recording.frame_no, range(F), progress)
     if progress is not None:
         progress.close()
+    points = np.full((int(row[-1]) + 1, M, 3), np.nan)
+    points[row] = result.points
+    residual = result.residual_px
+    flagged = {"flooded": result.flooded, "no_blobs": result.no_blobs}
+    ghosts, unlabelled, restarts = result.ghosts, result.unlabelled, result.restarts
     ticks = np.full(points.shape[0], -1, dtype=np.int64)
     ticks[row] = blobs.ticks
     seen = np.isfinite(points[row, :, 0])
@@ -391,6 +383,8 @@ def identify_recording(
         "unlabelled_per_frame": round(unlabelled / F, 3),
         "marker_gaps": _gaps(np.isfinite(points[..., 0])),
         "identification_restarts": restarts,
+        "filled_backward": counts.get("filled_backward", 0),
+        "label_conflicts": counts.get("label_conflicts", 0),
         "camera_frames": {
             name: {
                 "offline": int(blobs.offline[:, c].sum()),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import threading
 import time
 import tty
 from collections.abc import Iterator
@@ -144,5 +145,26 @@ def test_channel_skips_noise_and_finds_replies(pty_pair: tuple[int, str]) -> Non
         os.write(master, b"RESET7DB2\r")
         with pytest.raises(ProtocolError, match="reset itself"):
             channel.read_reply("SLOT:100")
+    finally:
+        link.close()
+
+
+def test_a_reply_under_way_at_the_deadline_gets_time_to_end(pty_pair: tuple[int, str]) -> None:
+    """A reply cut by a stall longer than the reply timeout (a starved device or host):
+    the line that had begun is given the timeout once more; a second stall is an error."""
+    master, path = pty_pair
+    link = SerialLink(path)
+    link.open()
+    try:
+        channel = CommandChannel(link, reply_timeout=0.3)
+        reply = line("OKAY")
+        os.write(master, reply[:4])
+        t0 = time.monotonic()
+        threading.Timer(0.45, os.write, (master, reply[4:])).start()
+        assert channel.read_reply("START:").kind == "okay"
+        assert 0.4 < time.monotonic() - t0 < 0.6 and channel.stats.crc_errors == 0
+        os.write(master, reply[:4])  # and the rest never comes
+        with pytest.raises(ProtocolError, match="damaged lines: b'OKAY'"):
+            channel.read_reply("START:")
     finally:
         link.close()

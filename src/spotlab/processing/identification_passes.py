@@ -1,0 +1,207 @@
+"""Identifying a whole recording twice, forward and backward in time, and joining the two.
+
+Live, the identifier only knows the frames it has seen: a marker hidden or moving
+fast when labelling starts is labelled only once its cluster has been recognised,
+and every frame before that stays empty. Offline the whole recording is there, so
+:func:`identify_both_ways` runs a second, independent identifier from the last frame
+to the first (tracking predicts as well backward as forward) and fills each marker-frame
+the forward pass left empty with the backward pass's label. Where both passes label a
+marker they must agree (within :data:`AGREE_MM`); where they do not, or where the joined
+frame puts two labels on one point, the frame's label is dropped for those markers: a
+gap, never a guess. Measured on the simulated walk of a subject the model never saw
+(docs/identification.md): a walk's first half second, when a foot or a wrist is still
+unlabelled, is what the backward pass fills.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spotlab.core.errors import CalibrationError
+from spotlab.geometry import Rig
+from spotlab.processing.errors import InputError
+from spotlab.processing.progress import ProgressSink
+from spotlab.reconstruction.identification import (
+    FLOODED,
+    NO_BLOBS,
+    BlobFrame,
+    Identifier,
+    MarkerModel,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Two passes agree on a marker when they put it this close (mm): the same blobs
+#: triangulate to the same point; a wrong label is a marker's spacing away.
+AGREE_MM = 3.0
+#: Frames lost in a row beyond which the identifier starts afresh (its prediction
+#: takes frames as consecutive; a label is earned again, never carried over a guess).
+MAX_LOST_FRAMES = 1
+
+
+@dataclass
+class PassResult:
+    """One identification pass over the decoded frames (in recording order).
+
+    Attributes
+    ----------
+    points : ndarray, shape (F, M, 3)
+        Labelled positions (mm) per decoded frame, NaN where not labelled or not
+        identified (a frame with no usable blob).
+    residual_px : ndarray, shape (F, M)
+        Ray residuals (px) of the labelled points.
+    ghosts, unlabelled, restarts : int
+        Reflection points rejected, points left unlabelled, fresh starts after gaps.
+    flooded, no_blobs : ndarray, shape (C,)
+        Frames each camera was flagged too full of blobs, or without blobs.
+    """
+
+    points: FloatArray
+    residual_px: FloatArray
+    ghosts: int = 0
+    unlabelled: int = 0
+    restarts: int = 0
+    flooded: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    no_blobs: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+def identify_pass(
+    rig: Rig,
+    model: MarkerModel,
+    frames: Sequence[tuple[BlobFrame, NDArray[np.bool_]]],
+    usable: NDArray[np.bool_],
+    frame_no: NDArray[np.int64],
+    order: Sequence[int],
+    progress: ProgressSink | None = None,
+) -> PassResult:
+    """Identify ``frames`` in the given ``order`` with one fresh identifier.
+
+    Parameters
+    ----------
+    rig : Rig
+    model : MarkerModel
+    frames : sequence of (BlobFrame, unusable cameras (C,) bool)
+        The decoded frames in recording order.
+    usable : ndarray, shape (F,)
+        Frames with at least one usable blob (others are gaps, like lost frames).
+    frame_no : ndarray, shape (F,)
+        Each frame's number on the hub's frame grid (gaps are lost frames).
+    order : sequence of int
+        Indices into ``frames`` in the order to identify them (forward or backward).
+    progress : ProgressSink, optional
+        Told every 256 frames.
+
+    Raises
+    ------
+    InputError
+        When the identification finds that the calibration does not match the cameras.
+    """
+    F, M, C = len(frames), len(model.labels), len(rig)
+    out = PassResult(
+        np.full((F, M, 3), np.nan),
+        np.full((F, M), np.nan),
+        flooded=np.zeros(C, np.int64),
+        no_blobs=np.zeros(C, np.int64),
+    )
+    identify = Identifier(rig, model)
+    last: int | None = None
+    for k, f in enumerate(order):
+        if not usable[f]:
+            continue
+        if last is not None and abs(int(frame_no[f]) - last) - 1 > MAX_LOST_FRAMES:
+            identify = Identifier(rig, model)
+            out.restarts += 1
+        last = int(frame_no[f])
+        try:
+            result = identify(*frames[f])
+        except CalibrationError as exc:
+            raise InputError(f"frame {int(frame_no[f])}: {exc}") from None
+        out.points[f] = result.points
+        out.residual_px[f] = result.residual_px
+        out.ghosts += result.ghosts
+        out.unlabelled += result.unlabelled
+        out.flooded += (result.camera_flags & FLOODED) != 0
+        out.no_blobs += (result.camera_flags & NO_BLOBS) != 0
+        if progress is not None and k % 256 == 0:
+            progress.update(k, f"{k} of {len(order)} frames")
+    return out
+
+
+def join_passes(forward: PassResult, backward: PassResult) -> tuple[PassResult, dict[str, int]]:
+    """The forward pass, its empty marker-frames filled from the backward pass.
+
+    Returns
+    -------
+    joined : PassResult
+        Points and residuals joined; the counters are the forward pass's.
+    counts : dict
+        ``filled_backward`` (marker-frames the backward pass added) and
+        ``label_conflicts`` (marker-frames dropped: the passes disagreed, or the joined
+        frame put two labels within :data:`AGREE_MM` of each other).
+    """
+    fwd, bwd = forward.points, backward.points
+    has_f = np.isfinite(fwd[..., 0])
+    has_b = np.isfinite(bwd[..., 0])
+    both = has_f & has_b
+    disagree = both & (np.linalg.norm(fwd - bwd, axis=-1) > AGREE_MM)
+    fill = has_b & ~has_f
+    points = np.where(fill[..., None], bwd, fwd)
+    residual = np.where(fill, backward.residual_px, forward.residual_px)
+    drop = disagree | _doubled(points)
+    points[drop] = np.nan
+    residual[drop] = np.nan
+    joined = PassResult(
+        points,
+        residual,
+        forward.ghosts,
+        forward.unlabelled,
+        forward.restarts,
+        forward.flooded,
+        forward.no_blobs,
+    )
+    counts = {
+        "filled_backward": int((fill & ~drop).sum()),
+        "label_conflicts": int(drop.sum()),
+    }
+    return joined, counts
+
+
+def _doubled(points: FloatArray, chunk: int = 512) -> NDArray[np.bool_]:
+    """Marker-frames whose point lies within AGREE_MM of another marker's in the frame."""
+    F, M, _ = points.shape
+    out = np.zeros((F, M), dtype=bool)
+    eye = np.eye(M, dtype=bool)
+    for a in range(0, F, chunk):
+        p = points[a : a + chunk]
+        with np.errstate(invalid="ignore"):
+            d = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
+            close = (d < AGREE_MM) & ~eye
+        out[a : a + chunk] = close.any(axis=2)
+    return out
+
+
+def identify_both_ways(
+    rig: Rig,
+    model: MarkerModel,
+    frames: Sequence[tuple[BlobFrame, NDArray[np.bool_]]],
+    usable: NDArray[np.bool_],
+    frame_no: NDArray[np.int64],
+    progress: ProgressSink | None = None,
+) -> tuple[PassResult, dict[str, Any]]:
+    """Identify forward, then backward, and join (:func:`join_passes`).
+
+    Returns
+    -------
+    joined : PassResult
+    counts : dict
+        ``filled_backward`` and ``label_conflicts``.
+    """
+    F = len(frames)
+    forward = identify_pass(rig, model, frames, usable, frame_no, range(F), progress)
+    backward = identify_pass(rig, model, frames, usable, frame_no, range(F - 1, -1, -1))
+    return join_passes(forward, backward)
