@@ -35,7 +35,8 @@ class StreamView:
     arrival_ns : int
         Host arrival of its last byte, ``time.monotonic_ns`` ns.
     cameras : list of list of [x, y]
-        Per camera (sensor) the readings seen, in the stream's units (pixels, counts).
+        Per camera (sensor) the readings seen, in the stream's units (pixels, counts):
+        the markers of an ``image2d`` stream, the blobs of a ``blobs2d`` one.
     """
 
     seq: int
@@ -72,6 +73,8 @@ class ClockPair:
         return ((self.dev_s - self.first_dev_s) / span - 1.0) * 1e6
 
 
+#: Stream kinds with a 2-D view (a timer has none).
+VIEWED = ("image2d", "blobs2d")
 #: Seconds after a stream's first frame at which its clock pair is anchored.
 ANCHOR_AFTER_S = 1.0
 
@@ -101,6 +104,8 @@ class ViewSink(SinkBase):
         self._columns: dict[str, tuple[int, int]] = {}
         self._tick_hz: dict[str, float] = {}
         self._seen_s: dict[str, float] = {}
+        self._kinds: dict[str, str] = {}
+        self._arrival_ns: dict[str, int] = {}
         self._period_ns = int(1e9 / max_rate_hz)
 
     def on_start(self, devices: Sequence[Device]) -> None:
@@ -109,13 +114,15 @@ class ViewSink(SinkBase):
             spec = device.spec
             self._columns[spec.name] = _xy_columns(spec.values)
             self._tick_hz[spec.name] = float(spec.tick_hz)
-            self.units[spec.name] = spec.units[0] if spec.units else ""
+            self.units[spec.name] = spec.units[0].split("|")[0] if spec.units else ""
+            self._kinds[spec.name] = str(spec.kind)
 
     def on_block(self, stream: str, block: FrameBlock) -> None:
         """Keep the block's last frame (at most ``max_rate_hz`` times a second)."""
         if len(block) == 0:
             return
         arrival = int(block.arrival_ns[-1])
+        self._arrival_ns[stream] = arrival
         tick_hz = self._tick_hz.get(stream, 0.0)
         if tick_hz > 0:
             dev_s, host_s = float(block.ticks[-1]) / tick_hz, arrival / 1e9
@@ -127,11 +134,16 @@ class ViewSink(SinkBase):
             else:
                 first = (old.first_dev_s, old.first_host_s)
             self.clocks[stream] = ClockPair(first[0], first[1], dev_s, host_s)
+        kind = self._kinds.get(stream)
+        if kind not in VIEWED:
+            return
         old_view = self.views.get(stream)
         if old_view is not None and arrival - old_view.arrival_ns < self._period_ns:
             return
         cx, cy = self._columns.get(stream, (0, 1))
         data = block.data[-1]  # (M, S, V)
+        if kind == "blobs2d":
+            data = data[1:]  # row 0 is each camera's own row (exposure, frame, counts)
         cameras: list[list[list[float]]] = []
         if data.shape[2] > max(cx, cy):
             for s in range(data.shape[1]):
@@ -142,10 +154,10 @@ class ViewSink(SinkBase):
 
     def last_arrival_s(self, stream: str) -> float | None:
         """Seconds since the stream's last frame arrived (None if none has)."""
-        view = self.views.get(stream)
-        if view is None:
+        arrival = self._arrival_ns.get(stream)
+        if arrival is None:
             return None
-        return (time.monotonic_ns() - view.arrival_ns) / 1e9
+        return (time.monotonic_ns() - arrival) / 1e9
 
 
 class MarkerSlot:

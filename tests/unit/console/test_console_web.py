@@ -1,0 +1,206 @@
+"""``spotlab console``: the trial store, the command line and the JSON API of a real
+process (``--sim`` and a lab file with a missing port), read with urllib."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from spotlab.console.web.trials import TrialInfo, TrialStore, check_name
+from spotlab.processing.errors import InputError
+
+CLI = (sys.executable, "-m", "spotlab.console.cli")
+
+
+# ---- the trial store ---------------------------------------------------------------
+@pytest.mark.parametrize("bad", ["", "..", "../x", "a/b", "a.b", "x" * 65, "é", " a", None, 3])
+def test_names_are_checked(bad: object) -> None:
+    with pytest.raises(InputError, match="not valid"):
+        check_name("trial", bad)
+
+
+def test_store_keeps_trials_inside_the_data_folder(tmp_path: Path) -> None:
+    store = TrialStore(tmp_path / "data")
+    assert store.journal("S01", "walk", "t-1_a") == store.root / "S01" / "walk" / "t-1_a.spj"
+    for tid in ("..", "S01.walk", "S01.walk.t1.x", "S01.%2e%2e.t1", "S01..t1"):
+        with pytest.raises(InputError):
+            store.parse_id(tid)
+    with pytest.raises(InputError, match="outside"):
+        store.resolve("..", "etc")
+    info = TrialInfo("S01", "walk", "t1", notes="first", frames={"a": 3})
+    store.save(info)
+    assert store.load("S01.walk.t1") == info
+    assert [t.id for t in store.all()] == ["S01.walk.t1"]
+    (store.root / "S01" / "walk" / "bad name.json").write_text("{}")  # not a trial name
+    assert [t.id for t in store.all()] == ["S01.walk.t1"]
+    with pytest.raises(InputError, match="no trial"):
+        store.load("S01.walk.t2")
+
+
+# ---- a real console process ------------------------------------------------------------
+class Console:
+    """A ``spotlab console`` child process and a small client of its API."""
+
+    def __init__(self, args: list[str], tmp: Path, token: str | None = None) -> None:
+        self.out, self.err = tmp / "console.out", tmp / "console.err"
+        with open(self.out, "wb") as out, open(self.err, "wb") as err:
+            self.proc = subprocess.Popen(
+                [*CLI, "console", "--no-browser", "--port", "0", *args],
+                stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+        self.token = token
+        deadline = time.monotonic() + 30
+        while not self.out.read_text().endswith("\n"):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise AssertionError(f"no URL: {self.err.read_text()}")
+            time.sleep(0.05)
+        self.url = self.out.read_text().splitlines()[0]
+        self.base = self.url.split("?")[0].rstrip("/")
+
+    def call(self, path: str, body: dict[str, Any] | None = None, token: bool = True) -> Any:
+        """(status, JSON) of GET ``path``, or POST with ``body``."""
+        data = None if body is None else json.dumps(body).encode()
+        request = urllib.request.Request(
+            self.base + path, data=data, method="POST" if data else "GET"
+        )
+        if token and self.token:
+            request.add_header("Authorization", f"Bearer {self.token}")
+        try:
+            with urllib.request.urlopen(request, timeout=30) as response:
+                return response.status, json.loads(response.read())
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read())
+
+    def until(self, what: Callable[[], Any], timeout: float = 15.0) -> Any:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if result := what():
+                return result
+            time.sleep(0.1)
+        raise AssertionError(f"timed out; stderr: {self.err.read_text()}")
+
+    def stop(self, sig: int = signal.SIGTERM) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return int(self.proc.returncode)
+
+
+@pytest.fixture
+def console(tmp_path: Path) -> Iterator[Callable[..., Console]]:
+    started: list[Console] = []
+
+    def start(*args: str, token: str | None = None) -> Console:
+        c = Console(list(args), tmp_path / f"c{len(started)}", token)
+        started.append(c)
+        return c
+
+    (tmp_path / "c0").mkdir()
+    (tmp_path / "c1").mkdir()
+    yield start
+    for c in started:
+        c.stop(signal.SIGKILL)
+
+
+def test_sim_console_api_records_and_exports(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    data = tmp_path / "data"
+    c = console("--sim", "--data", str(data))
+    assert c.url.startswith("http://127.0.0.1:")
+    code, status = c.call("/api/status")
+    assert code == 200 and status["simulated"] and status["mode"] == "preview"
+
+    def connected() -> list[dict[str, Any]] | None:
+        devices = c.call("/api/devices")[1]["devices"]
+        return devices if all(d["connected"] and d["frames"] > 0 for d in devices) else None
+
+    devices = c.until(connected)
+    assert {d["family"] for d in devices} == {"selspot", "centroid", "timer"}
+    # names are checked; nothing is written for a refused one
+    code, body = c.call("/api/trials/start", {"subject": "../x", "session": "s", "trial": "t"})
+    assert code == 400 and "subject name" in body["error"]
+    code, body = c.call(
+        "/api/trials/start", {"subject": "S", "session": "s", "trial": "t", "seconds": "x"}
+    )
+    assert code == 400
+    code, trial = c.call(
+        "/api/trials/start",
+        {"subject": "S01", "session": "walk", "trial": "t1", "notes": "n", "seconds": 1.5},
+    )
+    assert code == 201 and trial["state"] == "recording", trial
+    code, body = c.call("/api/trials/start", {"subject": "S01", "session": "walk", "trial": "t2"})
+    assert code == 409
+    done = c.until(lambda: [t for t in c.call("/api/trials")[1]["trials"] if t["state"] == "done"])
+    t = done[0]
+    assert t["id"] == "S01.walk.t1" and t["notes"] == "n" and t["duration_s"] >= 1.4
+    assert set(t["frames"]) == {"selspot", "centroid", "timer"} and min(t["frames"].values()) > 100
+    assert (data / "S01" / "walk" / "t1.spj").is_file() and (
+        data / "S01" / "walk" / "t1.json"
+    ).is_file()
+    code, result = c.call("/api/trials/S01.walk.t1/export", {"format": "trc"})
+    assert code == 200 and result["file"] == "S01/walk/t1.trc" and result["markers"] == 8, result
+    assert (data / "S01" / "walk" / "t1.trc").is_file()
+    assert c.call("/api/trials/S01.walk.t1/export", {"format": "exe"})[0] == 400
+    assert c.call("/api/trials/S01..t1/export", {"format": "c3d"})[0] == 400
+    assert c.call("/api/trials/S01.walk.t9/export", {"format": "c3d"})[0] == 404
+    assert c.call("/api/trials/stop", {})[0] == 409
+    # a second console on the same port: one error line, non-zero
+    port = c.base.rsplit(":", 1)[1]
+    second = subprocess.run(
+        [*CLI, "console", "--sim", "--no-browser", "--port", port, "--data", str(tmp_path / "d2")],
+        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    errors = [line for line in second.stderr.splitlines() if line.startswith("spotlab: error:")]
+    assert second.returncode != 0 and len(errors) == 1 and "in use" in errors[0], second.stderr
+    assert second.stdout == "" and not (tmp_path / "d2").exists()
+    assert c.stop(signal.SIGTERM) == 0, c.err.read_text()
+    assert "Traceback" not in c.err.read_text()
+
+
+def test_missing_port_and_token(console: Callable[..., Console], tmp_path: Path) -> None:
+    lab = tmp_path / "lab.toml"
+    missing = tmp_path / "no-such-adapter"
+    lab.write_text(f'[[device]]\nfamily = "timer"\nport = "{missing}"\n')
+    c = console(
+        "--lab", str(lab), "--data", str(tmp_path / "data"), "--token", "s3cret", token="s3cret"
+    )
+    assert c.url.endswith("/?token=s3cret")
+    assert c.call("/api/devices", token=False)[0] == 401
+    devices = c.until(lambda: c.call("/api/devices")[1]["devices"])
+    assert devices[0]["connected"] is False
+    assert devices[0]["last_error"] == f"port {missing} does not exist"
+    c.until(lambda: "does not exist" in c.err.read_text())
+    assert f"spotlab: warning: device timer: port {missing} does not exist" in c.err.read_text()
+    code, _ = c.call("/api/trials/start", {"subject": "S", "session": "s", "trial": "t"})
+    assert code == 201
+    failed = c.until(
+        lambda: [t for t in c.call("/api/trials")[1]["trials"] if t["state"] == "failed"]
+    )
+    assert failed[0]["messages"], failed
+    assert c.stop(signal.SIGINT) == 0, c.err.read_text()
+
+
+def test_non_loopback_host_needs_a_token(tmp_path: Path) -> None:
+    run = subprocess.run(
+        [*CLI, "console", "--sim", "--host", "0.0.0.0", "--no-browser",
+         "--data", str(tmp_path / "d")],
+        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert run.returncode != 0 and run.stdout == ""
+    assert run.stderr.startswith("spotlab: error: --host 0.0.0.0 serves beyond this machine")
+    assert not (tmp_path / "d").exists()
