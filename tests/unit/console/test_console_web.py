@@ -3,11 +3,13 @@ process (``--sim`` and a lab file with a missing port), read with urllib."""
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import signal
 import subprocess
 import sys
 import time
+import tomllib
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Iterator
@@ -20,6 +22,20 @@ from spotlab.console.web.trials import TrialInfo, TrialStore, check_name
 from spotlab.processing.errors import InputError
 
 CLI = (sys.executable, "-m", "spotlab.console.cli")
+
+
+def test_the_page_ships_as_package_data() -> None:
+    """Every file of static/ is matched by pyproject's package-data (no CDN, no fetch)."""
+    root = Path(__file__).resolve().parents[3]
+    config = tomllib.loads((root / "pyproject.toml").read_text())
+    patterns = config["tool"]["setuptools"]["package-data"]["spotlab.console.web"]
+    static = root / "src" / "spotlab" / "console" / "web" / "static"
+    files = sorted(p.relative_to(static.parent).as_posix() for p in static.iterdir())
+    assert files == ["static/console.css", "static/console.js", "static/index.html"]
+    assert all(any(fnmatch.fnmatch(f, pat) for pat in patterns) for f in files)
+    for f in files:
+        assert "http://" not in (static.parent / f).read_text().replace("http://127", "")
+        assert "https://" not in (static.parent / f).read_text()
 
 
 # ---- the trial store ---------------------------------------------------------------

@@ -88,7 +88,7 @@ function show2d(views) {
       g.fillStyle = "#ffd54f";
       for (const [x, y] of spots) {
         g.beginPath();
-        g.arc((x / ext[0]) * c.width, (y / ext[1]) * c.height, 3, 0, 2 * Math.PI);
+        g.arc((x / (1.05 * ext[0])) * c.width, (y / (1.05 * ext[1])) * c.height, 3, 0, 2 * Math.PI);
         g.fill();
       }
     });
