@@ -188,26 +188,41 @@ def test_sim_console_api_records_and_exports(
     assert "Traceback" not in c.err.read_text()
 
 
-def test_missing_port_and_token(console: Callable[..., Console], tmp_path: Path) -> None:
+def test_missing_port_device_drop_and_token(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    """A lab file naming a port that does not exist, and a device that drops out while
+    recording: the others record, the trial keeps what arrived and says so."""
     lab = tmp_path / "lab.toml"
     missing = tmp_path / "no-such-adapter"
-    lab.write_text(f'[[device]]\nfamily = "timer"\nport = "{missing}"\n')
+    dropping = "sim://selspot?cameras=2&leds=8&rate=100&faults=disconnect@1.5:30"
+    lab.write_text(
+        f'[[device]]\nfamily = "timer"\nport = "{missing}"\n\n'
+        f'[[device]]\nfamily = "selspot"\nport = "{dropping}"\ncameras = 2\nleds = 8\n'
+    )
     c = console(
         "--lab", str(lab), "--data", str(tmp_path / "data"), "--token", "s3cret", token="s3cret"
     )
     assert c.url.endswith("/?token=s3cret")
     assert c.call("/api/devices", token=False)[0] == 401
     devices = c.until(lambda: c.call("/api/devices")[1]["devices"])
-    assert devices[0]["connected"] is False
-    assert devices[0]["last_error"] == f"port {missing} does not exist"
+    timer = next(d for d in devices if d["family"] == "timer")
+    assert timer["connected"] is False
+    assert timer["last_error"] == f"port {missing} does not exist"
     c.until(lambda: "does not exist" in c.err.read_text())
     assert f"spotlab: warning: device timer: port {missing} does not exist" in c.err.read_text()
-    code, _ = c.call("/api/trials/start", {"subject": "S", "session": "s", "trial": "t"})
-    assert code == 201
-    failed = c.until(
-        lambda: [t for t in c.call("/api/trials")[1]["trials"] if t["state"] == "failed"]
+    code, _ = c.call(
+        "/api/trials/start", {"subject": "S", "session": "s", "trial": "t", "seconds": 3.5}
     )
-    assert failed[0]["messages"], failed
+    assert code == 201
+    done = c.until(
+        lambda: [t for t in c.call("/api/trials")[1]["trials"] if t["state"] != "recording"]
+    )
+    t = done[0]
+    assert t["state"] == "done" and list(t["frames"]) == ["selspot"], t
+    assert 100 <= t["frames"]["selspot"] <= 250, t  # 1.5 s at 100 Hz, then gone
+    assert f"timer: not recorded: port {missing} does not exist" in t["messages"]
+    assert any(m.startswith("selspot: no frame in the last") for m in t["messages"]), t
     assert c.stop(signal.SIGINT) == 0, c.err.read_text()
 
 

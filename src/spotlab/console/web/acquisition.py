@@ -77,6 +77,7 @@ class Acquisition:
         self._wanted: TrialInfo | None = None  # the trial to record, None: preview
         self._seconds: float | None = None
         self.trial: TrialInfo | None = None  # the trial being recorded
+        self._active: TrialInfo | None = None  # the trial taken up, until its sidecar is final
         self.finished = threading.Condition(self._lock)
         self.drivers: list[Driver] = []
         self.missing: dict[str, str] = {}
@@ -108,7 +109,7 @@ class Acquisition:
         if seconds is not None and not seconds > 0:
             raise InputError(f"seconds must be positive, got {seconds}")
         with self._lock:
-            if self._wanted is not None or self.trial is not None:
+            if self._wanted is not None or self._active is not None:
                 raise InputError("a trial is being recorded: stop it first")
             if journal.exists() or self.store.sidecar(journal).exists():
                 raise InputError(f"trial {info.id} exists: choose another trial name")
@@ -122,22 +123,19 @@ class Acquisition:
     def stop_trial(self, timeout: float = 20.0) -> TrialInfo:
         """Stop the trial being recorded and wait until its sidecar is final."""
         with self._lock:
-            info = self._wanted or self.trial
+            info = self._wanted or self._active
             if info is None:
                 raise InputError("no trial is being recorded")
             self._wanted = None
         self._wake.set()
         deadline = time.monotonic() + timeout
         with self.finished:
-            while self.trial is not None or self._recording_wanted(info):
+            while self._active is info or self._wanted is info:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     break
                 self.finished.wait(left)
         return self.store.load(info.id)
-
-    def _recording_wanted(self, info: TrialInfo) -> bool:
-        return self._wanted is not None and self._wanted.id == info.id
 
     # ---- what the page shows ----------------------------------------------------------
     def devices(self) -> list[dict[str, Any]]:
@@ -173,7 +171,13 @@ class Acquisition:
                         if clock is None or clock.drift_ppm is None
                         else round(clock.drift_ppm, 1)
                     ),
-                    "last_error": self.missing.get(name) or self.errors.get(name),
+                    "last_error": self.missing.get(name)
+                    or self.errors.get(name)
+                    or (
+                        f"no frame for {age:.1f} s"
+                        if running and age is not None and age >= STALE_S
+                        else None
+                    ),
                 }
             )
         return rows
@@ -205,8 +209,10 @@ class Acquisition:
             with self._lock:
                 if self._closed:
                     return
+                # cleared under the lock: a stop that changes _wanted after this wakes us
+                self._wake.clear()
                 wanted, seconds = self._wanted, self._seconds
-            self._wake.clear()
+                self._active = wanted
             self._one_session(wanted, seconds)
             if wanted is None and self.session is None:
                 self._wake.wait(RETRY_S)
@@ -324,10 +330,10 @@ class Acquisition:
         info.state = "failed"
         info.messages.append(why)
         self.store.save(info)
-        with self._lock:
+        with self.finished:
             if self._wanted is info:
                 self._wanted = None
-        with self.finished:
+            self._active = None
             self.finished.notify_all()
 
     def _finish_trial(self, info: TrialInfo, elapsed_s: float, stale: dict[str, float]) -> None:
@@ -342,6 +348,8 @@ class Acquisition:
         except Exception as exc:  # kept in the sidecar
             info.state = "interrupted"
             info.messages.append(f"the journal could not be summarised: {exc}")
+        for name, why in self.missing.items():
+            info.messages.append(f"{name}: not recorded: {why}")
         for name, age in stale.items():
             info.messages.append(
                 f"{name}: no frame in the last {age:.1f} s of the trial: "
@@ -353,4 +361,5 @@ class Acquisition:
         self.store.save(info)
         with self.finished:
             self.trial = None
+            self._active = None
             self.finished.notify_all()
