@@ -63,15 +63,9 @@ def sim_console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str,
 
 
 @pytest.fixture(scope="module")
-def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+def browser() -> Iterator[Any]:
     with sync_api.sync_playwright() as p:
         b = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
-        # Playwright's first file written starts its executor thread (asyncio_0): here, not in
-        # a test (the suite's leak check counts threads a test leaves running).
-        warm = b.new_page()
-        warm.goto("about:blank")
-        warm.screenshot(path=str(tmp_path_factory.mktemp("warm") / "blank.png"))
-        warm.close()
         try:
             yield b
         finally:
@@ -80,7 +74,9 @@ def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
 
 def _shot(page: Any, name: str) -> None:
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(ARTIFACTS / f"{name}.png"), full_page=True)
+    # The bytes, written here: Playwright writes a path= through asyncio's default
+    # executor, whose threads outlive the test (the suite's leak check counts them).
+    (ARTIFACTS / f"{name}.png").write_bytes(page.screenshot(full_page=True))
 
 
 def _trials(url: str) -> list[dict[str, Any]]:
