@@ -18,6 +18,8 @@ from typing import Any
 
 import pytest
 
+from spotlab.console.cli import main
+from spotlab.console.web.security import is_loopback
 from spotlab.console.web.trials import TrialInfo, TrialStore, check_name
 from spotlab.processing.errors import InputError
 
@@ -181,9 +183,12 @@ def test_sim_console_api_records_and_exports(
         [*CLI, "console", "--sim", "--no-browser", "--port", port, "--data", str(tmp_path / "d2")],
         capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
     )  # fmt: skip
-    errors = [line for line in second.stderr.splitlines() if line.startswith("spotlab: error:")]
-    assert second.returncode != 0 and len(errors) == 1 and "in use" in errors[0], second.stderr
-    assert second.stdout == "" and not (tmp_path / "d2").exists()
+    assert second.returncode != 0 and second.stdout == "", second.stderr
+    assert (
+        second.stderr
+        == f"spotlab: error: cannot listen on 127.0.0.1:{port}: it is in use (another console?)\n"
+    )
+    assert not (tmp_path / "d2").exists()
     assert c.stop(signal.SIGTERM) == 0, c.err.read_text()
     assert "Traceback" not in c.err.read_text()
 
@@ -226,12 +231,16 @@ def test_missing_port_device_drop_and_token(
     assert c.stop(signal.SIGINT) == 0, c.err.read_text()
 
 
-def test_non_loopback_host_needs_a_token(tmp_path: Path) -> None:
-    run = subprocess.run(
-        [*CLI, "console", "--sim", "--host", "0.0.0.0", "--no-browser",
-         "--data", str(tmp_path / "d")],
-        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
-    )  # fmt: skip
-    assert run.returncode != 0 and run.stdout == ""
-    assert run.stderr.startswith("spotlab: error: --host 0.0.0.0 serves beyond this machine")
-    assert not (tmp_path / "d").exists()
+def test_non_loopback_host_needs_a_token(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = tmp_path / "d"
+    for host in ("0.0.0.0", "192.168.1.20", "lab-pc"):
+        assert main(["console", "--sim", "--host", host, "--no-browser", "--data", str(data)]) != 0
+        out, err = capsys.readouterr()
+        assert out == ""
+        assert err.startswith(f"spotlab: error: --host {host} serves beyond this machine"), err
+        assert err.count("\n") == 1
+    assert not data.exists()
+    for host in ("127.0.0.1", "localhost", "::1", "127.0.0.2"):
+        assert is_loopback(host)

@@ -48,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--port must be 0-65535, got {args.port}")
     if args.lab is None and not args.sim:
         raise CommandError("give --lab LAB.toml (the devices to acquire from) or --sim")
+    from spotlab.console.web.security import check_access
+
+    check_access(args.host, args.token)  # before the web server's imports (seconds)
     from spotlab.console.web.server import serve  # its imports: starlette, uvicorn
 
     return serve(

@@ -6,7 +6,6 @@ line (and ``--port 0`` takes a free port whose number the URL gives).
 
 from __future__ import annotations
 
-import ipaddress
 import signal
 import socket
 import threading
@@ -20,20 +19,11 @@ import uvicorn
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.app import make_app
 from spotlab.console.web.lab_setup import plan_lab
+from spotlab.console.web.security import check_access
 from spotlab.console.web.trials import TrialStore
 from spotlab.processing.errors import InputError
 
-__all__ = ["bind", "is_loopback", "serve"]
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` names this machine only (``localhost``, 127.x, ::1)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+__all__ = ["bind", "serve"]
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -82,13 +72,7 @@ def serve(
     open_browser: bool,
 ) -> int:
     """Run the console; returns the exit code (0 after SIGINT or SIGTERM)."""
-    if token is not None and not token:
-        raise InputError("--token must not be empty")
-    if not is_loopback(host) and token is None:
-        raise InputError(
-            f"--host {host} serves beyond this machine: give --token T (the page and API "
-            "then need ?token=T or 'Authorization: Bearer T')"
-        )
+    check_access(host, token)
     sock = bind(host, port)
     try:
         plan = plan_lab(lab, sim, data)
