@@ -142,6 +142,10 @@ def test_sim_console_api_records_and_exports(
     assert c.url.startswith("http://127.0.0.1:")
     code, status = c.call("/api/status")
     assert code == 200 and status["simulated"] and status["mode"] == "preview"
+    assert [cam["name"] for cam in c.until(lambda: c.call("/api/status")[1]["cameras"])] == [
+        "cam0",
+        "cam1",
+    ]
 
     def connected() -> list[dict[str, Any]] | None:
         devices = c.call("/api/devices")[1]["devices"]

@@ -85,6 +85,7 @@ class Acquisition:
         self.view = ViewSink()
         self.markers = MarkerSlot()
         self.live_note: str | None = None
+        self.rig_cameras: list[dict[str, Any]] = []  # for the 3-D view
         self.session: Session | None = None
         self.started_at = time.time()
         self._thread = threading.Thread(target=self._run, name="spotlab-console-acq", daemon=True)
@@ -194,6 +195,7 @@ class Acquisition:
             "trial": None if trial is None else trial.to_dict(),
             "uptime_s": round(time.time() - self.started_at, 1),
             "live_3d": self.live_note or "on",
+            "cameras": self.rig_cameras,
             "errors": dict(self.errors),
         }
 
@@ -228,6 +230,14 @@ class Acquisition:
             rig = Rig.load(rig_path)
         except Exception as exc:  # told to the operator, preview goes on
             return sinks, f"off: rig {rig_path}: {exc}"
+        self.rig_cameras = [
+            {
+                "name": name,
+                "center": [round(float(v), 1) for v in cam.center],
+                "axis": [round(float(v), 4) for v in cam.R[2]],  # optical axis, world
+            }
+            for name, cam in zip(rig.names, rig, strict=True)
+        ]
         sinks.append(LivePipeline(rig, [self.markers], name="console-live"))
         return sinks, None
 

@@ -108,7 +108,11 @@ function project(p, c) {
   return [c.width / 2 + xr * f, c.height / 2 - up * f];
 }
 
-function show3d(markers) {
+function show3d(markers, cameras) {
+  for (const cam of cameras || []) {  // the floor and view reach the cameras
+    const reach = Math.max(Math.abs(cam.center[0]), Math.abs(cam.center[1])) + 500;
+    if (reach > view.half) view.half = Math.ceil(reach / 500) * 500;
+  }
   const c = document.getElementById("view3d");
   const g = c.getContext("2d");
   g.fillStyle = "#10161d";
@@ -125,8 +129,16 @@ function show3d(markers) {
     const [x0, y0] = project([0, 0, 0], c), [x1, y1] = project(axis, c);
     g.strokeStyle = colour; g.beginPath(); g.moveTo(x0, y0); g.lineTo(x1, y1); g.stroke();
   }
-  if (!markers) return;
   g.font = "10px sans-serif";
+  for (const cam of cameras || []) {  // the rig's cameras: centre and optical axis
+    const [x, y] = project(cam.center, c);
+    const tip = cam.center.map((v, k) => v + 400 * cam.axis[k]);
+    const [tx, ty] = project(tip, c);
+    g.strokeStyle = "#ffb74d"; g.beginPath(); g.moveTo(x, y); g.lineTo(tx, ty); g.stroke();
+    g.fillStyle = "#ffb74d"; g.fillRect(x - 4, y - 4, 8, 8);
+    g.fillText(cam.name, x + 6, y + 10);
+  }
+  if (!markers) return;
   markers.points.forEach((p, i) => {
     if (!p) return;
     const [x, y] = project(p, c);
@@ -230,7 +242,7 @@ function connect() {
     showDevices(m.devices);
     showBanner(m.status, m.devices);
     show2d(m.views);
-    show3d(m.markers);
+    show3d(m.markers, m.status.cameras);
     if (lastMode !== m.status.mode) { lastMode = m.status.mode; refreshTrials(); }
   };
 }
