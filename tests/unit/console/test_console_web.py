@@ -19,6 +19,8 @@ from typing import Any
 import pytest
 
 from spotlab.console.cli import main
+from spotlab.console.web.acquisition import Acquisition
+from spotlab.console.web.lab_setup import plan_lab
 from spotlab.console.web.security import is_loopback
 from spotlab.console.web.trials import TrialInfo, TrialStore, check_name
 from spotlab.processing.errors import InputError
@@ -248,3 +250,34 @@ def test_non_loopback_host_needs_a_token(
     assert not data.exists()
     for host in ("127.0.0.1", "localhost", "::1", "127.0.0.2"):
         assert is_loopback(host)
+
+
+def test_a_trial_whose_devices_cannot_start_fails_and_leaves_no_journal(tmp_path: Path) -> None:
+    lab = tmp_path / "lab.toml"
+    lab.write_text(f'[[device]]\nfamily = "timer"\nport = "{tmp_path / "gone"}"\n')
+    warned: list[str] = []
+    store = TrialStore(tmp_path / "data")
+    acq = Acquisition(plan_lab(lab, False, tmp_path), store, warned.append)
+    # stopped before the acquisition thread took it up (the thread is not started yet)
+    acq.start_trial(TrialInfo("S", "s", "early"))
+    early = acq.stop_trial()
+    assert early.state == "failed" and early.messages == ["stopped before the devices started"]
+    assert store.load("S.s.early").state == "failed"
+    acq.start()
+    try:
+        acq.start_trial(TrialInfo("S", "s", "t"))
+        with pytest.raises(InputError, match="being recorded"):
+            acq.start_trial(TrialInfo("S", "s", "t2"))
+        deadline = time.monotonic() + 10
+        while store.load("S.s.t").state == "recording" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        with pytest.raises(InputError, match="no trial is being recorded"):
+            acq.stop_trial()
+    finally:
+        acq.close()
+    info = store.load("S.s.t")
+    assert info.state == "failed" and info.messages == ["no device could start"], info
+    assert not (tmp_path / "data" / "S" / "s" / "t.spj").exists()
+    assert warned == [f"device timer: port {tmp_path / 'gone'} does not exist"]
+    with pytest.raises(InputError, match="exists"):
+        acq.start_trial(TrialInfo("S", "s", "t"))

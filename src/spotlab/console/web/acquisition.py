@@ -128,6 +128,11 @@ class Acquisition:
             if info is None:
                 raise InputError("no trial is being recorded")
             self._wanted = None
+            if self._active is not info:  # not taken up by the acquisition thread yet
+                info.state = "failed"
+                info.messages.append("stopped before the devices started")
+                self.store.save(info)
+                return info
         self._wake.set()
         deadline = time.monotonic() + timeout
         with self.finished:
@@ -254,7 +259,10 @@ class Acquisition:
         self.drivers = drivers
         if not present:
             return None
-        for live in (True, False):
+        # The live pipeline is tried in the preview; a recording session takes what the
+        # preview found (a failed start stops every sink, the trial's recorder too).
+        tries = (True, False) if recorder is None else (not self.live_note,)
+        for live in tries:
             sinks, note = self._sinks(live)
             if recorder is not None:
                 sinks.insert(0, recorder)
@@ -262,7 +270,7 @@ class Acquisition:
             try:
                 session.start()
             except Exception as exc:  # told to the operator
-                if live and note is None:
+                if live and note is None and recorder is None:
                     self.live_note = f"off: {exc}"
                     self.drivers = drivers = self.plan.drivers()
                     present = [d for d in drivers if d.name not in self.missing]
@@ -294,9 +302,12 @@ class Acquisition:
                 return
         session = self._start_session(recorder)
         if session is None:
-            if wanted is not None:
-                if recorder is not None:
+            if wanted is not None and recorder is not None:
+                try:
                     recorder.stop()
+                finally:
+                    # nothing but a failed start-up: leave no journal (the sidecar says why)
+                    journal.unlink(missing_ok=True)
                 self._fail_trial(wanted, self.errors.get("lab", "no device could start"))
             return
         self.session = session
