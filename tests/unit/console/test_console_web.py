@@ -154,6 +154,8 @@ def test_sim_console_api_records_and_exports(
         return devices if all(d["connected"] and d["frames"] > 0 for d in devices) else None
 
     devices = c.until(connected)
+    latency = c.until(lambda: c.call("/api/status")[1]["live_latency"])
+    assert latency["frames"] > 0 and latency["p50_us"] > 0, latency
     assert {d["family"] for d in devices} == {"selspot", "centroid", "timer"}
     # names are checked; nothing is written for a refused one
     code, body = c.call("/api/trials/start", {"subject": "../x", "session": "s", "trial": "t"})

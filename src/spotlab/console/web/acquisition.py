@@ -86,6 +86,7 @@ class Acquisition:
         self.markers = MarkerSlot()
         self.live_note: str | None = None
         self.rig_cameras: list[dict[str, Any]] = []  # for the 3-D view
+        self.live: LivePipeline | None = None
         self.session: Session | None = None
         self.started_at = time.time()
         self._thread = threading.Thread(target=self._run, name="spotlab-console-acq", daemon=True)
@@ -204,6 +205,15 @@ class Acquisition:
             "errors": dict(self.errors),
         }
 
+    def live_latency(self) -> dict[str, Any] | None:
+        """The live pipeline's host latency in the running session (frames, p50_us,
+        p99_us, max_us, mean_us, over_1ms; docs/live.md), None without one."""
+        live = self.live
+        if live is None or self.session is None or self.live_note:
+            return None
+        summary = live.stats().latency
+        return {k: getattr(summary, k) for k in summary.__dataclass_fields__}
+
     # ---- the acquisition thread -------------------------------------------------------
     def _note(self, key: str, message: str) -> None:
         self.errors[key] = message
@@ -243,7 +253,8 @@ class Acquisition:
             }
             for name, cam in zip(rig.names, rig, strict=True)
         ]
-        sinks.append(LivePipeline(rig, [self.markers], name="console-live"))
+        self.live = LivePipeline(rig, [self.markers], name="console-live")
+        sinks.append(self.live)
         return sinks, None
 
     def _start_session(self, recorder: Recorder | None) -> Session | None:

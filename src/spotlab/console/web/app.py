@@ -31,7 +31,7 @@ from spotlab.processing.errors import InputError
 __all__ = ["LIVE_HZ", "make_app"]
 
 #: Messages a second on /api/live (the page draws at this rate at most).
-LIVE_HZ = 20.0
+LIVE_HZ = 30.0
 STATIC = Path(__file__).parent / "static"
 
 
@@ -60,7 +60,9 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
         return FileResponse(STATIC / "index.html", media_type="text/html")
 
     async def status(request: Request) -> Response:
-        return await guard(request) or JSONResponse({"version": __version__, **acq.status()})
+        return await guard(request) or JSONResponse(
+            {"version": __version__, **acq.status(), "live_latency": acq.live_latency()}
+        )
 
     async def devices(request: Request) -> Response:
         return await guard(request) or JSONResponse({"devices": acq.devices()})
@@ -137,9 +139,9 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
             return
         await ws.accept()
         period = 1.0 / LIVE_HZ
+        due = time.monotonic()
         try:
             while True:
-                t = time.monotonic()
                 views = {
                     name: {"seq": v.seq, "cameras": v.cameras, "units": acq.view.units.get(name)}
                     for name, v in list(acq.view.views.items())
@@ -152,7 +154,9 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
                     "markers": acq.markers.snapshot(),
                 }
                 await ws.send_text(json.dumps(message))
-                await asyncio.sleep(max(0.0, period - (time.monotonic() - t)))
+                # on a fixed grid of 1 / LIVE_HZ (a late message does not delay the next)
+                due = max(due + period, time.monotonic() - period)
+                await asyncio.sleep(max(0.0, due - time.monotonic()))
         except (WebSocketDisconnect, RuntimeError, OSError):
             return
 
