@@ -167,3 +167,35 @@ def test_a_browser_leaving_mid_trial_does_not_end_it(
             break
         time.sleep(0.2)
     assert found and found[0]["state"] == "done" and found[0]["duration_s"] >= 1.9, found
+
+
+def test_a_missing_port_is_shown_in_the_page(browser: Any, tmp_path: Path) -> None:
+    missing = tmp_path / "no-such-adapter"
+    lab = tmp_path / "lab.toml"
+    lab.write_text(f'[[device]]\nfamily = "timer"\nport = "{missing}"\nname = "sync"\n')
+    out, err = tmp_path / "out", tmp_path / "err"
+    with open(out, "wb") as o, open(err, "wb") as e:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "spotlab.console.cli", "console", "--lab", str(lab),
+             "--no-browser", "--port", "0", "--data", str(tmp_path / "data")],
+            stdout=o, stderr=e, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 30
+        while not out.read_text().endswith("\n"):
+            assert proc.poll() is None and time.monotonic() < deadline, err.read_text()
+            time.sleep(0.05)
+        page = browser.new_page()
+        page.goto(out.read_text().splitlines()[0])
+        page.wait_for_function("!document.getElementById('banner').hidden")
+        banner = page.inner_text("#banner")
+        assert banner == f"sync: port {missing} does not exist", banner
+        row = page.locator("#devices tr[data-device='sync']")
+        assert "not connected" in row.inner_text()
+        _shot(page, "5-missing-port")
+        page.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=20)
+    assert code == 0
+    assert f"spotlab: warning: device sync: port {missing} does not exist" in err.read_text()
