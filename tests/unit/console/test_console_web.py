@@ -197,8 +197,16 @@ def test_sim_console_api_records_and_exports(
         == f"spotlab: error: cannot listen on 127.0.0.1:{port}: it is in use (another console?)\n"
     )
     assert not (tmp_path / "d2").exists()
+    # SIGTERM while a trial runs: the trial is finished, the exit code is 0
+    assert (
+        c.call("/api/trials/start", {"subject": "S01", "session": "walk", "trial": "t3"})[0] == 201
+    )
+    c.until(lambda: c.call("/api/status")[1]["mode"] == "recording")
     assert c.stop(signal.SIGTERM) == 0, c.err.read_text()
     assert "Traceback" not in c.err.read_text()
+    last = json.loads((data / "S01" / "walk" / "t3.json").read_text())
+    assert last["state"] == "done" and min(last["frames"].values()) > 0, last
+    assert last["messages"] == ["stopped when the console was stopped"], last
 
 
 def test_missing_port_device_drop_and_token(

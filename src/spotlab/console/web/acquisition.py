@@ -15,6 +15,7 @@ when it appears.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 import time
@@ -212,7 +213,13 @@ class Acquisition:
         if live is None or self.session is None or self.live_note:
             return None
         summary = live.stats().latency
-        return {k: getattr(summary, k) for k in summary.__dataclass_fields__}
+        if summary.frames == 0:  # a session just started: no figures yet (NaN)
+            return None
+        out: dict[str, Any] = {}
+        for key in summary.__dataclass_fields__:
+            value = getattr(summary, key)
+            out[key] = None if isinstance(value, float) and not math.isfinite(value) else value
+        return out
 
     # ---- the acquisition thread -------------------------------------------------------
     def _note(self, key: str, message: str) -> None:
@@ -380,6 +387,8 @@ class Acquisition:
         except Exception as exc:  # kept in the sidecar
             info.state = "interrupted"
             info.messages.append(f"the journal could not be summarised: {exc}")
+        if self._closed:
+            info.messages.append("stopped when the console was stopped")
         for name, why in self.missing.items():
             info.messages.append(f"{name}: not recorded: {why}")
         for name, age in stale.items():
