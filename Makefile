@@ -12,7 +12,13 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	@# PYTHONWARNINGS: setuptools' build backend warns about every editable install
-	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,lsl,oak]'
+	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,lsl,oak,console]'
+	@# The browser tests of the console (tests/browser) drive Debian's chromium.
+	@if [ ! -x /usr/bin/chromium ]; then \
+		if [ "$$(id -u)" = 0 ]; then apt-get install -y chromium || \
+			(apt-get update && apt-get install -y chromium); \
+		else echo "note: the console's browser tests need chromium: sudo apt-get install chromium"; fi; \
+	fi
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -37,6 +37,7 @@ COMMANDS: dict[str, str] = {
     "export": "write a recording or a trial file as C3D or TRC",
     "demo": "simulated system end to end: record with faults, decode, report",
     "udev": "install or check the udev rules for USB-serial adapters and OAK cameras",
+    "console": "serve the lab acquisition console, a live web page (devices, views, trials)",
 }
 
 

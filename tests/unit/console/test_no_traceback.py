@@ -247,6 +247,35 @@ CASES: list[Case] = [
     ("udev-bad", lambda f: ["udev", "--nonsense"], ("udev:",)),
     ("devices-bad", lambda f: ["devices", "--nonsense"], ("devices:", "--nonsense")),
     ("info-extra", lambda f: ["info", str(f["plain"]), "extra"], ("info:", "extra")),
+    ("console-nolab", lambda f: ["console", "--no-browser"], ("--lab", "--sim")),
+    (
+        "console-host",
+        lambda f: [
+            "console",
+            "--sim",
+            "--host",
+            "10.1.2.3",
+            "--no-browser",
+            "--data",
+            str(f["dir"] / "data"),
+        ],
+        ("--token",),
+    ),
+    (
+        "console-lab",
+        lambda f: [
+            "console",
+            "--lab",
+            str(f["dir"] / "missing.toml"),
+            "--port",
+            "0",
+            "--no-browser",
+            "--data",
+            str(f["dir"] / "data"),
+        ],
+        ("missing.toml",),
+    ),
+    ("console-port", lambda f: ["console", "--sim", "--port", "70000"], ("--port",)),
 ]
 
 

@@ -1,0 +1,174 @@
+"""The console's web app: the page, the JSON API and the live WebSocket (docs/console.md).
+
+Every ``/api`` route asks for the token when one is set (header ``Authorization: Bearer
+T`` or query ``?token=T``); the page and its two files are public (they hold no data).
+The WebSocket reads the latest values the acquisition keeps (``live_view``) at
+``LIVE_HZ``; it never waits on, nor is waited for by, the acquisition.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Mount, Route, WebSocketRoute
+from starlette.staticfiles import StaticFiles
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from spotlab import __version__
+from spotlab.console.web.acquisition import Acquisition
+from spotlab.console.web.export import export_trial
+from spotlab.console.web.trials import TrialInfo
+from spotlab.processing.errors import InputError
+
+__all__ = ["LIVE_HZ", "make_app"]
+
+#: Messages a second on /api/live (the page draws at this rate at most).
+LIVE_HZ = 30.0
+STATIC = Path(__file__).parent / "static"
+
+
+def _error(status: int, message: str) -> JSONResponse:
+    return JSONResponse({"error": message}, status_code=status)
+
+
+def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
+    """The Starlette app of a running :class:`Acquisition`."""
+
+    def allowed(given: str | None) -> bool:
+        return token is None or (given is not None and hmac.compare_digest(given, token))
+
+    def token_of(request: Request | WebSocket) -> str | None:
+        auth = request.headers.get("authorization", "")
+        if auth.lower().startswith("bearer "):
+            return auth[7:].strip()
+        return request.query_params.get("token")
+
+    async def guard(request: Request) -> JSONResponse | None:
+        if not allowed(token_of(request)):
+            return _error(401, "a valid token is needed (Authorization: Bearer T or ?token=T)")
+        return None
+
+    async def index(request: Request) -> Response:
+        return FileResponse(STATIC / "index.html", media_type="text/html")
+
+    async def status(request: Request) -> Response:
+        return await guard(request) or JSONResponse(
+            {"version": __version__, **acq.status(), "live_latency": acq.live_latency()}
+        )
+
+    async def devices(request: Request) -> Response:
+        return await guard(request) or JSONResponse({"devices": acq.devices()})
+
+    async def trials(request: Request) -> Response:
+        return await guard(request) or JSONResponse(
+            {"trials": [t.to_dict() for t in acq.store.all()]}
+        )
+
+    async def body(request: Request) -> dict[str, Any]:
+        try:
+            raw = await request.json()
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise InputError(f"the body is not JSON: {exc}") from None
+        if not isinstance(raw, dict):
+            raise InputError("the body must be a JSON object")
+        return raw
+
+    async def start(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        try:
+            raw = await body(request)
+            notes = raw.get("notes", "")
+            if not isinstance(notes, str) or len(notes) > 10_000:
+                raise InputError("notes must be text of at most 10000 characters")
+            seconds = raw.get("seconds")
+            if seconds is not None and (
+                isinstance(seconds, bool) or not isinstance(seconds, int | float)
+            ):
+                raise InputError("seconds must be a number")
+            info = TrialInfo(
+                subject=str(raw.get("subject", "")),
+                session=str(raw.get("session", "")),
+                trial=str(raw.get("trial", "")),
+                notes=notes,
+            )
+            info = acq.start_trial(info, None if seconds is None else float(seconds))
+        except InputError as exc:
+            return _error(409 if "being recorded" in str(exc) else 400, str(exc))
+        return JSONResponse(info.to_dict(), status_code=201)
+
+    async def stop(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        try:
+            info = await asyncio.to_thread(acq.stop_trial)
+        except InputError as exc:
+            return _error(409, str(exc))
+        return JSONResponse(info.to_dict())
+
+    async def export(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        try:
+            raw = await body(request)
+            info = acq.store.load(request.path_params["tid"])
+        except InputError as exc:
+            return _error(404 if str(exc).startswith("no trial") else 400, str(exc))
+        lab = acq.plan.lab
+        try:
+            result = await asyncio.to_thread(
+                export_trial, acq.store, info, raw.get("format", "c3d"), lab.rig, lab.path
+            )
+        except InputError as exc:
+            return _error(409 if "being recorded" in str(exc) else 400, str(exc))
+        except Exception as exc:  # a numerics error, told to the page
+            return _error(422, f"export failed: {exc}")
+        return JSONResponse(result)
+
+    async def live(ws: WebSocket) -> None:
+        if not allowed(token_of(ws)):
+            await ws.close(code=4401)
+            return
+        await ws.accept()
+        period = 1.0 / LIVE_HZ
+        due = time.monotonic()
+        try:
+            while True:
+                views = {
+                    name: {"seq": v.seq, "cameras": v.cameras, "units": acq.view.units.get(name)}
+                    for name, v in list(acq.view.views.items())
+                }
+                message = {
+                    "t": time.time(),
+                    "status": acq.status(),
+                    "devices": acq.devices(),
+                    "views": views,
+                    "markers": acq.markers.snapshot(),
+                }
+                await ws.send_text(json.dumps(message))
+                # on a fixed grid of 1 / LIVE_HZ (a late message does not delay the next)
+                due = max(due + period, time.monotonic() - period)
+                await asyncio.sleep(max(0.0, due - time.monotonic()))
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            return
+
+    routes = [
+        Route("/", index),
+        Route("/api/status", status),
+        Route("/api/devices", devices),
+        Route("/api/trials", trials),
+        Route("/api/trials/start", start, methods=["POST"]),
+        Route("/api/trials/stop", stop, methods=["POST"]),
+        Route("/api/trials/{tid}/export", export, methods=["POST"]),
+        WebSocketRoute("/api/live", live),
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+    ]
+    return Starlette(routes=routes)

@@ -1,0 +1,101 @@
+"""The lab the console acquires from: a lab file, or the simulated lab of ``--sim``.
+
+``--sim`` writes a lab file of its own (``DATA/.sim/lab.toml``: the dot keeps it apart
+from trial names) naming three in-process simulators (``sim://`` URLs): a SELSPOT-style
+system of 2 cameras x 8 LEDs on a gait, a video-centroid hub of 2 cameras and a timer,
+all at 100 Hz. Its rig is the SELSPOT simulator's true calibration, which the simulator
+writes itself (``rig_out``) when its port is first opened; the console never imports
+the simulators (pyserial loads their ``sim://`` handler by name).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import serial
+
+from spotlab.console.device_settings import requests_from_lab
+from spotlab.drivers import Driver, load_driver
+from spotlab.io.lab_file import Lab, load_lab
+from spotlab.processing.errors import InputError
+
+__all__ = ["LabPlan", "plan_lab", "sim_lab_file"]
+
+#: Rate of every simulated device, Hz.
+SIM_RATE_HZ = 100
+#: pyserial's package of the simulators' ``sim://`` handler.
+_SIM_HANDLERS = "spotlab.simulators.transports"
+
+
+@dataclass(frozen=True)
+class LabPlan:
+    """The devices to acquire from.
+
+    Attributes
+    ----------
+    lab : Lab
+        The lab file, as read.
+    simulated : bool
+        Whether it is the simulated lab of ``--sim``.
+    """
+
+    lab: Lab
+    simulated: bool
+
+    def drivers(self) -> list[Driver]:
+        """New driver objects for every device of the lab (not started)."""
+        drivers: list[Driver] = []
+        counts: dict[str, int] = {}
+        requests = requests_from_lab(self.lab.devices, {})
+        for r in requests:
+            counts[r.family] = counts.get(r.family, 0) + 1
+        seen: dict[str, int] = {}
+        for r in requests:
+            n = seen.get(r.family, 0)
+            seen[r.family] = n + 1
+            default = r.family if counts[r.family] == 1 else f"{r.family}{n}"
+            drivers.append(load_driver(r.family)(r.port, name=r.name or default, **r.options))
+        names = [d.name for d in drivers]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise InputError(f"stream name {twice[0]!r} is given to several devices")
+        return drivers
+
+
+def sim_lab_file(data: Path) -> Path:
+    """Write the simulated lab's file under ``data/.sim`` and its true rig; the file's path."""
+    folder = data / ".sim"
+    folder.mkdir(parents=True, exist_ok=True)
+    rig = folder / "rig.toml"
+    selspot = f"sim://selspot?cameras=2&leds=8&rate={SIM_RATE_HZ}&seed=1&motion=gait&rig_out={rig}"
+    centroid = f"sim://centroid?cameras=2&markers=6&rate={SIM_RATE_HZ}&seed=2"
+    timer = f"sim://timer?rate={SIM_RATE_HZ}"
+    path = folder / "lab.toml"
+    path.write_text(
+        "# The simulated lab of `spotlab console --sim` (written by the console).\n"
+        'rig = "rig.toml"  # the SELSPOT simulator\'s true calibration\n\n'
+        f'[[device]]\nfamily = "selspot"\nport = "{selspot}"\ncameras = 2\nleds = 8\n\n'
+        f'[[device]]\nfamily = "centroid"\nport = "{centroid}"\n\n'
+        f'[[device]]\nfamily = "timer"\nport = "{timer}"\n',
+        encoding="utf-8",
+    )
+    if _SIM_HANDLERS not in serial.protocol_handler_packages:
+        serial.protocol_handler_packages.append(_SIM_HANDLERS)
+    # Opening the port builds the simulated device, which writes its true rig.
+    serial.serial_for_url(selspot, timeout=0.1).close()
+    return path
+
+
+def plan_lab(lab_path: Path | None, sim: bool, data: Path) -> LabPlan:
+    """The lab of ``--lab LAB.toml`` or ``--sim`` (InputError if neither or both)."""
+    if sim and lab_path is not None:
+        raise InputError("give --lab LAB.toml or --sim, not both")
+    if sim:
+        return LabPlan(load_lab(sim_lab_file(data)), True)
+    if lab_path is None:
+        raise InputError("give --lab LAB.toml (the devices to acquire from) or --sim")
+    lab = load_lab(lab_path)
+    if not lab.devices:
+        raise InputError(f"lab file {lab_path}: it names no device")
+    return LabPlan(lab, False)

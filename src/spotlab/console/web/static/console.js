@@ -1,0 +1,252 @@
+// spotlab console page: talks to the JSON API and the /api/live WebSocket (docs/console.md).
+"use strict";
+
+const token = new URLSearchParams(location.search).get("token");
+// What the page received, for the operator's scripts and the browser tests.
+const received = { messages: 0, markers: null, markerSeqs: [], status: null };
+window.spotlab = received;
+
+function api(path, options = {}) {
+  const headers = Object.assign({ "Content-Type": "application/json" }, options.headers || {});
+  if (token) headers.Authorization = "Bearer " + token;
+  return fetch(path, Object.assign({}, options, { headers })).then(async (r) => {
+    const body = await r.json().catch(() => ({}));
+    if (!r.ok) throw new Error(body.error || r.status + " " + r.statusText);
+    return body;
+  });
+}
+
+function el(tag, attrs = {}, text = "") {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  if (text !== "") e.textContent = text;
+  return e;
+}
+
+function fmt(v, digits) {
+  if (v === null || v === undefined) return "—";
+  return typeof v === "number" && digits !== undefined ? v.toFixed(digits) : String(v);
+}
+
+// ---- devices ---------------------------------------------------------------------
+function showDevices(devices) {
+  const body = document.querySelector("#devices tbody");
+  body.replaceChildren();
+  for (const d of devices) {
+    const tr = el("tr", { "data-device": d.name });
+    const cells = [
+      [d.name], [d.connected ? "connected" : "not connected", d.connected ? "ok" : "bad"],
+      [d.family], [d.port, "port"], [fmt(d.rate_hz, 1)], [fmt(d.frames)], [fmt(d.lost_frames)],
+      [fmt(d.crc_errors)], [fmt(d.resyncs)], [fmt(d.clock_offset_s, 3)],
+      [fmt(d.clock_drift_ppm, 1)], [d.last_error || ""],
+    ];
+    for (const [text, cls] of cells) {
+      const td = el("td", cls ? { class: cls } : {}, text);
+      if (cls === "port") td.title = text;
+      tr.appendChild(td);
+    }
+    body.appendChild(tr);
+  }
+}
+
+function showBanner(status, devices) {
+  const lines = [];
+  for (const d of devices) if (d.last_error) lines.push(d.name + ": " + d.last_error);
+  if (status && status.errors && status.errors.lab) lines.push(status.errors.lab);
+  const banner = document.getElementById("banner");
+  banner.hidden = lines.length === 0;
+  banner.textContent = lines.join(" · ");
+}
+
+// ---- 2-D views -------------------------------------------------------------------
+const extents = {};
+function camCanvas(stream, i) {
+  const id = "cam-" + stream + "-" + i;
+  let c = document.getElementById(id);
+  if (!c) {
+    const box = el("div", { class: "cam" });
+    c = el("canvas", { id, width: 200, height: 200, "data-stream": stream });
+    box.appendChild(c);
+    box.appendChild(el("div", {}, stream + " camera " + (i + 1)));
+    document.getElementById("views2d").appendChild(box);
+  }
+  return c;
+}
+
+function show2d(views) {
+  for (const [stream, v] of Object.entries(views)) {
+    let ext = extents[stream];
+    if (!ext) ext = extents[stream] = v.units === "count" ? [4095, 4095] : [640, 480];
+    v.cameras.forEach((spots, i) => {
+      for (const [x, y] of spots) {
+        if (v.units !== "count") { ext[0] = Math.max(ext[0], x); ext[1] = Math.max(ext[1], y); }
+      }
+      const c = camCanvas(stream, i);
+      const g = c.getContext("2d");
+      g.fillStyle = "#10161d";
+      g.fillRect(0, 0, c.width, c.height);
+      g.fillStyle = "#ffd54f";
+      for (const [x, y] of spots) {
+        g.beginPath();
+        g.arc((x / (1.05 * ext[0])) * c.width, (y / (1.05 * ext[1])) * c.height, 3, 0, 2 * Math.PI);
+        g.fill();
+      }
+    });
+  }
+}
+
+// ---- 3-D view ------------------------------------------------------------------------
+const view = { az: -0.9, el: 0.45, dist: 9000, half: 2500 };
+function project(p, c) {
+  const [x, y, z] = p;
+  const ca = Math.cos(view.az), sa = Math.sin(view.az);
+  const xr = ca * x - sa * y, yr = sa * x + ca * y;
+  const ce = Math.cos(view.el), se = Math.sin(view.el);
+  const depth = view.dist + yr * ce + (z - 800) * se;  // towards the scene
+  const up = (z - 800) * ce - yr * se;
+  const f = (c.height * 1.1 * view.dist) / (2 * view.half) / depth;
+  return [c.width / 2 + xr * f, c.height / 2 - up * f];
+}
+
+function show3d(markers, cameras) {
+  for (const cam of cameras || []) {  // the floor and view reach the cameras
+    const reach = Math.max(Math.abs(cam.center[0]), Math.abs(cam.center[1])) + 500;
+    if (reach > view.half) view.half = Math.ceil(reach / 500) * 500;
+  }
+  const c = document.getElementById("view3d");
+  const g = c.getContext("2d");
+  g.fillStyle = "#10161d";
+  g.fillRect(0, 0, c.width, c.height);
+  g.strokeStyle = "#35506b";
+  g.lineWidth = 1;
+  for (let k = -view.half; k <= view.half; k += 500) {  // the floor, z = 0, every 0.5 m
+    for (const [a, b] of [[[k, -view.half, 0], [k, view.half, 0]], [[-view.half, k, 0], [view.half, k, 0]]]) {
+      const [x0, y0] = project(a, c), [x1, y1] = project(b, c);
+      g.beginPath(); g.moveTo(x0, y0); g.lineTo(x1, y1); g.stroke();
+    }
+  }
+  for (const [axis, colour] of [[[500, 0, 0], "#e57373"], [[0, 500, 0], "#81c784"], [[0, 0, 500], "#64b5f6"]]) {
+    const [x0, y0] = project([0, 0, 0], c), [x1, y1] = project(axis, c);
+    g.strokeStyle = colour; g.beginPath(); g.moveTo(x0, y0); g.lineTo(x1, y1); g.stroke();
+  }
+  g.font = "10px sans-serif";
+  for (const cam of cameras || []) {  // the rig's cameras: centre and optical axis
+    const [x, y] = project(cam.center, c);
+    const tip = cam.center.map((v, k) => v + 400 * cam.axis[k]);
+    const [tx, ty] = project(tip, c);
+    g.strokeStyle = "#ffb74d"; g.beginPath(); g.moveTo(x, y); g.lineTo(tx, ty); g.stroke();
+    g.fillStyle = "#ffb74d"; g.fillRect(x - 4, y - 4, 8, 8);
+    g.fillText(cam.name, x + 6, y + 10);
+  }
+  if (!markers) return;
+  markers.points.forEach((p, i) => {
+    if (!p) return;
+    const [x, y] = project(p, c);
+    const [fx, fy] = project([p[0], p[1], 0], c);
+    g.strokeStyle = "#ffffff22"; g.beginPath(); g.moveTo(fx, fy); g.lineTo(x, y); g.stroke();
+    g.fillStyle = "#4dd0e1";
+    g.beginPath(); g.arc(x, y, 4, 0, 2 * Math.PI); g.fill();
+    g.fillStyle = "#cfd8dc";
+    g.fillText(markers.labels[i] || "", x + 6, y - 4);
+  });
+}
+
+// ---- recording and trials ------------------------------------------------------------
+let recording = false;
+function showMode(status) {
+  recording = status.mode === "recording";
+  document.getElementById("mode").textContent = recording
+    ? "● recording " + status.trial.id : "preview";
+  document.getElementById("mode").className = recording ? "bad" : "";
+  document.getElementById("record").disabled = recording;
+  document.getElementById("stop").disabled = !recording;
+  document.getElementById("lab").textContent = (status.simulated ? "simulated lab · " : "") + status.lab;
+  document.getElementById("live3d").textContent = status.live_3d === "on" ? "" : "(" + status.live_3d + ")";
+}
+
+function say(id, text, bad) {
+  const p = document.getElementById(id);
+  p.textContent = text;
+  p.className = "msg " + (bad ? "bad" : "");
+}
+
+document.getElementById("record-form").addEventListener("submit", (ev) => {
+  ev.preventDefault();
+  const f = new FormData(ev.target);
+  const body = { subject: f.get("subject"), session: f.get("session"), trial: f.get("trial"), notes: f.get("notes") };
+  if (f.get("seconds")) body.seconds = Number(f.get("seconds"));
+  api("/api/trials/start", { method: "POST", body: JSON.stringify(body) })
+    .then((t) => { say("record-msg", "recording " + t.id + " → " + t.journal); refreshTrials(); })
+    .catch((e) => say("record-msg", e.message, true));
+});
+
+document.getElementById("stop").addEventListener("click", () => {
+  api("/api/trials/stop", { method: "POST", body: "{}" })
+    .then((t) => { say("record-msg", t.id + ": " + t.state + ", " + t.duration_s + " s"); refreshTrials(); })
+    .catch((e) => say("record-msg", e.message, true));
+});
+
+function sum(obj) { return Object.values(obj || {}).reduce((a, b) => a + b, 0); }
+
+function exportTrial(id, button) {
+  button.disabled = true;
+  say("trials-msg", "exporting " + id + "…");
+  api("/api/trials/" + encodeURIComponent(id) + "/export", { method: "POST", body: JSON.stringify({ format: "c3d" }) })
+    .then((r) => { say("trials-msg", id + " → " + r.file + " (" + r.frames + " frames, " + r.markers + " markers)"); refreshTrials(); })
+    .catch((e) => say("trials-msg", id + ": " + e.message, true))
+    .finally(() => { button.disabled = false; });
+}
+
+function refreshTrials() {
+  return api("/api/trials").then(({ trials }) => {
+    const body = document.querySelector("#trials tbody");
+    body.replaceChildren();
+    for (const t of trials.slice().reverse()) {
+      const tr = el("tr", { "data-trial": t.id });
+      const lost = Object.entries(t.lost).map(([k, v]) => k + " " + v).join(", ");
+      for (const text of [t.id, t.started_at.replace("T", " ").slice(0, 19), fmt(t.duration_s, 2),
+                          String(sum(t.frames)), lost, t.state + (t.exports.length ? " · " + t.exports.join(", ") : ""),
+                          [t.notes, ...t.messages].filter(Boolean).join(" · ")]) {
+        tr.appendChild(el("td", {}, text));
+      }
+      const td = el("td");
+      const b = el("button", { class: "export", type: "button" }, "Export C3D");
+      b.disabled = t.state === "recording" || t.state === "failed";
+      b.addEventListener("click", () => exportTrial(t.id, b));
+      td.appendChild(b);
+      tr.appendChild(td);
+      body.appendChild(tr);
+    }
+  }).catch((e) => say("trials-msg", e.message, true));
+}
+
+// ---- the live socket ------------------------------------------------------------------
+let lastMode = null;
+function connect() {
+  const proto = location.protocol === "https:" ? "wss://" : "ws://";
+  const ws = new WebSocket(proto + location.host + "/api/live" + (token ? "?token=" + encodeURIComponent(token) : ""));
+  const link = document.getElementById("link");
+  ws.onopen = () => { link.textContent = "live"; link.className = "ok"; };
+  ws.onclose = () => { link.textContent = "disconnected: retrying"; link.className = "bad"; setTimeout(connect, 1000); };
+  ws.onmessage = (ev) => {
+    const m = JSON.parse(ev.data);
+    received.messages += 1;
+    received.status = m.status;
+    received.devices = m.devices;
+    if (m.markers) {
+      received.markers = m.markers;
+      received.markerSeqs.push(m.markers.seq);
+      if (received.markerSeqs.length > 100) received.markerSeqs.shift();
+    }
+    showMode(m.status);
+    showDevices(m.devices);
+    showBanner(m.status, m.devices);
+    show2d(m.views);
+    show3d(m.markers, m.status.cameras);
+    if (lastMode !== m.status.mode) { lastMode = m.status.mode; refreshTrials(); }
+  };
+}
+
+refreshTrials();
+connect();
+setInterval(refreshTrials, 3000);

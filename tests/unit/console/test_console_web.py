@@ -1,0 +1,293 @@
+"""``spotlab console``: the trial store, the command line and the JSON API of a real
+process (``--sim`` and a lab file with a missing port), read with urllib."""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from spotlab.console.cli import main
+from spotlab.console.web.acquisition import Acquisition
+from spotlab.console.web.lab_setup import plan_lab
+from spotlab.console.web.security import is_loopback
+from spotlab.console.web.trials import TrialInfo, TrialStore, check_name
+from spotlab.processing.errors import InputError
+
+CLI = (sys.executable, "-m", "spotlab.console.cli")
+
+
+def test_the_page_ships_as_package_data() -> None:
+    """Every file of static/ is matched by pyproject's package-data (no CDN, no fetch)."""
+    root = Path(__file__).resolve().parents[3]
+    config = tomllib.loads((root / "pyproject.toml").read_text())
+    patterns = config["tool"]["setuptools"]["package-data"]["spotlab.console.web"]
+    static = root / "src" / "spotlab" / "console" / "web" / "static"
+    files = sorted(p.relative_to(static.parent).as_posix() for p in static.iterdir())
+    assert files == ["static/console.css", "static/console.js", "static/index.html"]
+    assert all(any(fnmatch.fnmatch(f, pat) for pat in patterns) for f in files)
+    for f in files:
+        assert "http://" not in (static.parent / f).read_text().replace("http://127", "")
+        assert "https://" not in (static.parent / f).read_text()
+
+
+# ---- the trial store ---------------------------------------------------------------
+@pytest.mark.parametrize("bad", ["", "..", "../x", "a/b", "a.b", "x" * 65, "é", " a", None, 3])
+def test_names_are_checked(bad: object) -> None:
+    with pytest.raises(InputError, match="not valid"):
+        check_name("trial", bad)
+
+
+def test_store_keeps_trials_inside_the_data_folder(tmp_path: Path) -> None:
+    store = TrialStore(tmp_path / "data")
+    assert store.journal("S01", "walk", "t-1_a") == store.root / "S01" / "walk" / "t-1_a.spj"
+    for tid in ("..", "S01.walk", "S01.walk.t1.x", "S01.%2e%2e.t1", "S01..t1"):
+        with pytest.raises(InputError):
+            store.parse_id(tid)
+    with pytest.raises(InputError, match="outside"):
+        store.resolve("..", "etc")
+    info = TrialInfo("S01", "walk", "t1", notes="first", frames={"a": 3})
+    store.save(info)
+    assert store.load("S01.walk.t1") == info
+    assert [t.id for t in store.all()] == ["S01.walk.t1"]
+    (store.root / "S01" / "walk" / "bad name.json").write_text("{}")  # not a trial name
+    assert [t.id for t in store.all()] == ["S01.walk.t1"]
+    with pytest.raises(InputError, match="no trial"):
+        store.load("S01.walk.t2")
+
+
+# ---- a real console process ------------------------------------------------------------
+class Console:
+    """A ``spotlab console`` child process and a small client of its API."""
+
+    def __init__(self, args: list[str], tmp: Path, token: str | None = None) -> None:
+        self.out, self.err = tmp / "console.out", tmp / "console.err"
+        with open(self.out, "wb") as out, open(self.err, "wb") as err:
+            self.proc = subprocess.Popen(
+                [*CLI, "console", "--no-browser", "--port", "0", *args],
+                stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+        self.token = token
+        deadline = time.monotonic() + 30
+        while not self.out.read_text().endswith("\n"):
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise AssertionError(f"no URL: {self.err.read_text()}")
+            time.sleep(0.05)
+        self.url = self.out.read_text().splitlines()[0]
+        self.base = self.url.split("?")[0].rstrip("/")
+
+    def call(self, path: str, body: dict[str, Any] | None = None, token: bool = True) -> Any:
+        """(status, JSON) of GET ``path``, or POST with ``body``."""
+        data = None if body is None else json.dumps(body).encode()
+        request = urllib.request.Request(
+            self.base + path, data=data, method="POST" if data else "GET"
+        )
+        if token and self.token:
+            request.add_header("Authorization", f"Bearer {self.token}")
+        try:
+            with urllib.request.urlopen(request, timeout=30) as response:
+                return response.status, json.loads(response.read())
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read())
+
+    def until(self, what: Callable[[], Any], timeout: float = 15.0) -> Any:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if result := what():
+                return result
+            time.sleep(0.1)
+        raise AssertionError(f"timed out; stderr: {self.err.read_text()}")
+
+    def stop(self, sig: int = signal.SIGTERM) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return int(self.proc.returncode)
+
+
+@pytest.fixture
+def console(tmp_path: Path) -> Iterator[Callable[..., Console]]:
+    started: list[Console] = []
+
+    def start(*args: str, token: str | None = None) -> Console:
+        c = Console(list(args), tmp_path / f"c{len(started)}", token)
+        started.append(c)
+        return c
+
+    (tmp_path / "c0").mkdir()
+    (tmp_path / "c1").mkdir()
+    yield start
+    for c in started:
+        c.stop(signal.SIGKILL)
+
+
+def test_sim_console_api_records_and_exports(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    data = tmp_path / "data"
+    c = console("--sim", "--data", str(data))
+    assert c.url.startswith("http://127.0.0.1:")
+    code, status = c.call("/api/status")
+    assert code == 200 and status["simulated"] and status["mode"] == "preview"
+    assert [cam["name"] for cam in c.until(lambda: c.call("/api/status")[1]["cameras"])] == [
+        "cam0",
+        "cam1",
+    ]
+
+    def connected() -> list[dict[str, Any]] | None:
+        devices = c.call("/api/devices")[1]["devices"]
+        return devices if all(d["connected"] and d["frames"] > 0 for d in devices) else None
+
+    devices = c.until(connected)
+    latency = c.until(lambda: c.call("/api/status")[1]["live_latency"])
+    assert latency["frames"] > 0 and latency["p50_us"] > 0, latency
+    assert {d["family"] for d in devices} == {"selspot", "centroid", "timer"}
+    # names are checked; nothing is written for a refused one
+    code, body = c.call("/api/trials/start", {"subject": "../x", "session": "s", "trial": "t"})
+    assert code == 400 and "subject name" in body["error"]
+    code, body = c.call(
+        "/api/trials/start", {"subject": "S", "session": "s", "trial": "t", "seconds": "x"}
+    )
+    assert code == 400
+    code, trial = c.call(
+        "/api/trials/start",
+        {"subject": "S01", "session": "walk", "trial": "t1", "notes": "n", "seconds": 1.5},
+    )
+    assert code == 201 and trial["state"] == "recording", trial
+    code, body = c.call("/api/trials/start", {"subject": "S01", "session": "walk", "trial": "t2"})
+    assert code == 409
+    done = c.until(lambda: [t for t in c.call("/api/trials")[1]["trials"] if t["state"] == "done"])
+    t = done[0]
+    assert t["id"] == "S01.walk.t1" and t["notes"] == "n" and t["duration_s"] >= 1.4
+    assert set(t["frames"]) == {"selspot", "centroid", "timer"} and min(t["frames"].values()) > 100
+    assert (data / "S01" / "walk" / "t1.spj").is_file() and (
+        data / "S01" / "walk" / "t1.json"
+    ).is_file()
+    code, result = c.call("/api/trials/S01.walk.t1/export", {"format": "trc"})
+    assert code == 200 and result["file"] == "S01/walk/t1.trc" and result["markers"] == 8, result
+    assert (data / "S01" / "walk" / "t1.trc").is_file()
+    assert c.call("/api/trials/S01.walk.t1/export", {"format": "exe"})[0] == 400
+    assert c.call("/api/trials/S01..t1/export", {"format": "c3d"})[0] == 400
+    assert c.call("/api/trials/S01.walk.t9/export", {"format": "c3d"})[0] == 404
+    assert c.call("/api/trials/stop", {})[0] == 409
+    # a second console on the same port: one error line, non-zero
+    port = c.base.rsplit(":", 1)[1]
+    second = subprocess.run(
+        [*CLI, "console", "--sim", "--no-browser", "--port", port, "--data", str(tmp_path / "d2")],
+        capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert second.returncode != 0 and second.stdout == "", second.stderr
+    assert (
+        second.stderr
+        == f"spotlab: error: cannot listen on 127.0.0.1:{port}: it is in use (another console?)\n"
+    )
+    assert not (tmp_path / "d2").exists()
+    # SIGTERM while a trial runs: the trial is finished, the exit code is 0
+    assert (
+        c.call("/api/trials/start", {"subject": "S01", "session": "walk", "trial": "t3"})[0] == 201
+    )
+    c.until(lambda: c.call("/api/status")[1]["mode"] == "recording")
+    assert c.stop(signal.SIGTERM) == 0, c.err.read_text()
+    assert "Traceback" not in c.err.read_text()
+    last = json.loads((data / "S01" / "walk" / "t3.json").read_text())
+    assert last["state"] == "done" and min(last["frames"].values()) > 0, last
+    assert last["messages"] == ["stopped when the console was stopped"], last
+
+
+def test_missing_port_device_drop_and_token(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    """A lab file naming a port that does not exist, and a device that drops out while
+    recording: the others record, the trial keeps what arrived and says so."""
+    lab = tmp_path / "lab.toml"
+    missing = tmp_path / "no-such-adapter"
+    dropping = "sim://selspot?cameras=2&leds=8&rate=100&faults=disconnect@1.5:30"
+    lab.write_text(
+        f'[[device]]\nfamily = "timer"\nport = "{missing}"\n\n'
+        f'[[device]]\nfamily = "selspot"\nport = "{dropping}"\ncameras = 2\nleds = 8\n'
+    )
+    c = console(
+        "--lab", str(lab), "--data", str(tmp_path / "data"), "--token", "s3cret", token="s3cret"
+    )
+    assert c.url.endswith("/?token=s3cret")
+    assert c.call("/api/devices", token=False)[0] == 401
+    devices = c.until(lambda: c.call("/api/devices")[1]["devices"])
+    timer = next(d for d in devices if d["family"] == "timer")
+    assert timer["connected"] is False
+    assert timer["last_error"] == f"port {missing} does not exist"
+    c.until(lambda: "does not exist" in c.err.read_text())
+    assert f"spotlab: warning: device timer: port {missing} does not exist" in c.err.read_text()
+    code, _ = c.call(
+        "/api/trials/start", {"subject": "S", "session": "s", "trial": "t", "seconds": 3.5}
+    )
+    assert code == 201
+    done = c.until(
+        lambda: [t for t in c.call("/api/trials")[1]["trials"] if t["state"] != "recording"]
+    )
+    t = done[0]
+    assert t["state"] == "done" and list(t["frames"]) == ["selspot"], t
+    assert 100 <= t["frames"]["selspot"] <= 250, t  # 1.5 s at 100 Hz, then gone
+    assert f"timer: not recorded: port {missing} does not exist" in t["messages"]
+    assert any(m.startswith("selspot: no frame in the last") for m in t["messages"]), t
+    assert c.stop(signal.SIGINT) == 0, c.err.read_text()
+
+
+def test_non_loopback_host_needs_a_token(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = tmp_path / "d"
+    for host in ("0.0.0.0", "192.168.1.20", "lab-pc"):
+        assert main(["console", "--sim", "--host", host, "--no-browser", "--data", str(data)]) != 0
+        out, err = capsys.readouterr()
+        assert out == ""
+        assert err.startswith(f"spotlab: error: --host {host} serves beyond this machine"), err
+        assert err.count("\n") == 1
+    assert not data.exists()
+    for host in ("127.0.0.1", "localhost", "::1", "127.0.0.2"):
+        assert is_loopback(host)
+
+
+def test_a_trial_whose_devices_cannot_start_fails_and_leaves_no_journal(tmp_path: Path) -> None:
+    lab = tmp_path / "lab.toml"
+    lab.write_text(f'[[device]]\nfamily = "timer"\nport = "{tmp_path / "gone"}"\n')
+    warned: list[str] = []
+    store = TrialStore(tmp_path / "data")
+    acq = Acquisition(plan_lab(lab, False, tmp_path), store, warned.append)
+    # stopped before the acquisition thread took it up (the thread is not started yet)
+    acq.start_trial(TrialInfo("S", "s", "early"))
+    early = acq.stop_trial()
+    assert early.state == "failed" and early.messages == ["stopped before the devices started"]
+    assert store.load("S.s.early").state == "failed"
+    acq.start()
+    try:
+        acq.start_trial(TrialInfo("S", "s", "t"))
+        with pytest.raises(InputError, match="being recorded"):
+            acq.start_trial(TrialInfo("S", "s", "t2"))
+        deadline = time.monotonic() + 10
+        while store.load("S.s.t").state == "recording" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        with pytest.raises(InputError, match="no trial is being recorded"):
+            acq.stop_trial()
+    finally:
+        acq.close()
+    info = store.load("S.s.t")
+    assert info.state == "failed" and info.messages == ["no device could start"], info
+    assert not (tmp_path / "data" / "S" / "s" / "t.spj").exists()
+    assert warned == [f"device timer: port {tmp_path / 'gone'} does not exist"]
+    with pytest.raises(InputError, match="exists"):
+        acq.start_trial(TrialInfo("S", "s", "t"))
