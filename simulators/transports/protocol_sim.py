@@ -19,6 +19,12 @@ The device lives as long as this port object: closing and reopening keeps it.
 It is switched on 100 ms before the port first opens, and whatever it sends
 while the port is closed is lost, so a freshly opened port holds no stale
 bytes (send ``RESET:`` or a BREAK to see the banner).
+
+The device runs in the reading thread. When it cannot keep up with the world clock
+(a host too busy to render its frames in real time), it catches up
+:data:`CATCH_UP_NS` at a time and its clock runs slow, as the pseudo-terminal server's
+does: a read returns what those steps sent instead of rendering, ever later, every frame
+due since the last read.
 """
 
 from __future__ import annotations
@@ -39,6 +45,8 @@ MAX_WAIT_NS = 50_000_000
 #: hands them over once per 1 ms USB frame (FTDI latency timer set to 1 ms by our
 #: udev rules). Without it every read would return the few bytes sent since the last.
 USB_FRAME_NS = 1_000_000
+#: Device time one read may render when the device has fallen behind the world clock.
+CATCH_UP_NS = 10_000_000
 
 
 class Serial(SerialBase):
@@ -51,6 +59,7 @@ class Serial(SerialBase):
         self._rx = bytearray()
         self._bauds: list[tuple[int, int]] = []
         self._opened_ns = 0
+        self._clock_ns = 0  # the device's time as this port last drove it
         self._dead = False
         self._rng = np.random.default_rng(0x5E41)
         super().__init__(*args, **kwargs)
@@ -71,7 +80,7 @@ class Serial(SerialBase):
         if self.device.link_down(now):
             raise SerialException(f"could not open port {self.portstr!r}: device disconnected")
         self.device.output(now)  # sent while the port was closed: nobody listened
-        self._opened_ns = now
+        self._opened_ns = self._clock_ns = now
         self._dead = False
         self._bauds = [(now, int(self._baudrate))]
         self.is_open = True
@@ -79,7 +88,7 @@ class Serial(SerialBase):
     def close(self) -> None:
         """Close the port; the simulated device keeps running (its files are flushed)."""
         if self.is_open and self.device is not None:
-            self.device.flush()
+            self.device.flush(self._clock_ns)
         self.is_open = False
         self._rx.clear()
 
@@ -94,13 +103,14 @@ class Serial(SerialBase):
 
     def _reconfigure_port(self) -> None:
         if self.is_open:
-            self._bauds.append((time.monotonic_ns(), int(self._baudrate)))
+            self._bauds.append((self._now(), int(self._baudrate)))
             del self._bauds[:-64]
 
     def _update_break_state(self) -> None:
         if self._break_state and self.device is not None:
-            self._check_link(time.monotonic_ns())
-            self.device.send_break()
+            now = self._now()
+            self._check_link(now)
+            self.device.send_break(now)
 
     def _update_rts_state(self) -> None:
         pass
@@ -125,6 +135,19 @@ class Serial(SerialBase):
         return True
 
     # -- data ----------------------------------------------------------------
+    def _now(self) -> int:
+        """The device's time: the world clock's, unless the device has fallen behind it
+        with work due (then one :data:`CATCH_UP_NS` step further)."""
+        real = time.monotonic_ns()
+        clock = self._clock_ns
+        if self.device is not None and clock and real - clock > CATCH_UP_NS:
+            due = self.device.next_event_ns()
+            if due is not None and due < real:
+                self._clock_ns = clock + CATCH_UP_NS
+                return self._clock_ns
+        self._clock_ns = max(clock, real)
+        return self._clock_ns
+
     def _check_link(self, now: int) -> Mcs1Device:
         if not self.is_open or self.device is None:
             raise PortNotOpenError()
@@ -141,7 +164,7 @@ class Serial(SerialBase):
         return self._bauds[max(i, 0)][1]
 
     def _pull(self) -> None:
-        now = time.monotonic_ns()
+        now = self._now()
         device = self._check_link(now)
         for seg in device.output_segments(now - now % USB_FRAME_NS):
             rx_baud = self._baud_at(seg.end_ns)
@@ -179,15 +202,16 @@ class Serial(SerialBase):
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         """Send bytes to the device at the port's baud rate."""
-        device = self._check_link(time.monotonic_ns())
+        now = self._now()
+        device = self._check_link(now)
         payload = bytes(data)
-        device.receive(payload, line_baud=int(self._baudrate))
+        device.receive(payload, now, line_baud=int(self._baudrate))
         return len(payload)
 
     def flush(self) -> None:
         """Wait until every written byte has reached the device."""
         if self.device is not None and self.is_open:
-            wait = self.device.host_bytes_done_ns() - time.monotonic_ns()
+            wait = self.device.host_bytes_done_ns() - self._now()
             if wait > 0:
                 time.sleep(wait / 1e9)
 

@@ -255,3 +255,39 @@ def test_tcp_socket_url() -> None:
             assert ask(second, "VER:0").startswith("SPX")
         finally:
             second.close()
+
+
+def test_a_sim_device_too_slow_for_real_time_runs_its_clock_slow(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A hub whose frames take 10 ms each to render at 300 Hz (a host too busy for it):
+    reads catch it up 10 ms at a time, so a recording ends on time with fewer frames and
+    none lost, instead of each read rendering every frame due since the last, ever later."""
+    from spotlab.acquisition.recorder import Recorder
+    from spotlab.acquisition.replay import replay
+    from spotlab.acquisition.session import Session
+    from spotlab.drivers.centroid import CentroidDriver
+    from spotlab.processing.decoding import decoder_for
+    from spotlab.simulators.centroid import CentroidStream
+    from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
+
+    take = CentroidStream.take
+
+    def slow_take(self: CentroidStream) -> object:
+        time.sleep(0.01)
+        return take(self)
+
+    monkeypatch.setattr(CentroidStream, "take", slow_take)
+    options = CentroidSimOptions(cameras=2, markers=6, rate_hz=300, seed=1)
+    driver = CentroidDriver(centroid_url_for(options), cameras=2, rate_hz=300)
+    journal = tmp_path / "slow.spj"
+    t0 = time.monotonic()
+    with Session([driver], [Recorder(journal, {})], close_devices=True) as session:
+        session.run_for(1.0)
+    took = time.monotonic() - t0
+    blocks = [b for _, b in replay(journal, decoder_for) if len(b)]
+    seq = np.concatenate([b.seq for b in blocks]) if blocks else np.zeros(0, np.int64)
+    print(f"{len(seq)} frames in {took:.2f} s, lost {driver.stats.lost_frames}")
+    assert took < 6.0
+    assert 20 <= len(seq) < 200  # at most 100 frames a second rendered, not 300
+    assert np.all(np.diff(seq) == 1) and driver.stats.lost_frames == 0
