@@ -36,6 +36,7 @@ COMMANDS: dict[str, str] = {
     "model": "learn, show, check or init a marker model for identification",
     "export": "write a recording or a trial file as C3D or TRC",
     "demo": "simulated system end to end: record with faults, decode, report",
+    "bench": "run a device's conformance suite and measure its timing, with a report",
     "udev": "install or check the udev rules for USB-serial adapters and OAK cameras",
 }
 

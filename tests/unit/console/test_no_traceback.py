@@ -247,6 +247,13 @@ CASES: list[Case] = [
     ("udev-bad", lambda f: ["udev", "--nonsense"], ("udev:",)),
     ("devices-bad", lambda f: ["devices", "--nonsense"], ("devices:", "--nonsense")),
     ("info-extra", lambda f: ["info", str(f["plain"]), "extra"], ("info:", "extra")),
+    ("bench-usage", lambda f: ["bench"], ("nothing to bench",)),
+    (
+        "bench--report",
+        lambda f: ["bench", "sim://selspot", "--driver", "selspot", "--report", str(f["plain"])],
+        ("--report", "is a file"),
+    ),
+    ("bench-family", lambda f: ["bench", "x", "--driver", "lsl"], ("no conformance suite",)),
 ]
 
 
