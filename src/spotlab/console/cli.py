@@ -37,6 +37,7 @@ COMMANDS: dict[str, str] = {
     "export": "write a recording or a trial file as C3D or TRC",
     "demo": "simulated system end to end: record with faults, decode, report",
     "bench": "run a device's conformance suite and measure its timing, with a report",
+    "hil": "run a hardware-in-the-loop scenario of simulators, or list the shipped ones",
     "udev": "install or check the udev rules for USB-serial adapters and OAK cameras",
 }
 

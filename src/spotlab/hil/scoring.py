@@ -1,0 +1,147 @@
+"""A scenario's figures, from the recording, its processing and the simulators' truth.
+
+Nothing here runs while recording: the truth files and fault logs are read after
+the simulators have stopped. Per device (docs/hil.md): the recording's counts
+(:func:`spotlab.acquisition.summary.summarize`, what ``spotlab info`` prints), the
+frames the simulator sent and the faults it injected (its fault log), and
+``frames_missing``, frames the device sent intact that the recording lacks. For the
+run: the largest error of the session times against the true instants after one
+affine map shared by all streams (``sync_error_us``), and the 3-D error of a
+reconstruction against the true marker positions (``error_3d_rms_mm``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from spotlab.acquisition.summary import summarize
+from spotlab.processing.decoding import decoder_for
+from spotlab.processing.session_times import recording_timebase, write_timestamps
+from spotlab.processing.trajectories import reconstruct_file, write_trial
+from spotlab.simulators.truth import read_truth_positions
+
+F64 = npt.NDArray[np.float64]
+_COUNTS = ("frames", "lost_frames", "crc_errors", "resyncs", "duplicates", "gaps", "reconnects")
+
+
+def _fault_log(path: Path | None) -> dict[str, Any] | None:
+    if path is None or not path.is_file():
+        return None
+    data: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    return data
+
+
+def device_figures(
+    journal: Path, fault_logs: Mapping[str, Path | None]
+) -> dict[str, dict[str, float | None]]:
+    """Per stream: the recording's counts, and what the simulator says it sent.
+
+    ``frames_missing`` is the frames the device sent and a host should have decoded
+    (sent, less those it damaged, lost in a disconnection or discarded at a reset)
+    that the recording does not hold; None without a fault log.
+    """
+    summary = summarize(journal, decoder_for)
+    out: dict[str, dict[str, float | None]] = {}
+    for stream in summary.streams:
+        figures: dict[str, float | None] = {k: float(getattr(stream, k)) for k in _COUNTS}
+        figures["rate_hz"] = float(stream.rate_hz)
+        figures.update(frames_sent=None, frames_missing=None, faults_injected=None)
+        log = _fault_log(fault_logs.get(stream.name))
+        if log is not None:
+            totals = log.get("totals", {})
+            sent = float(totals.get("frames_sent", 0))
+            unusable = sum(float(totals.get(k, 0)) for k in
+                           ("corrupted_frames", "lost_frames", "discarded_frames"))  # fmt: skip
+            figures["frames_sent"] = sent
+            figures["frames_missing"] = max(0.0, sent - unusable - float(stream.frames))
+            figures["faults_injected"] = float(len(log.get("faults", [])))
+        out[stream.name] = figures
+    return out
+
+
+def _true_times(truth: Path, family: str, seq: Sequence[int], ticks: Sequence[int]) -> F64:
+    """True instant of each frame, matched by its 16-bit seq and 32-bit device tick (the
+    timer's truth counts µs where its frames count 100 ns)."""
+    div = 10 if family == "timer" else 1
+    with open(truth, newline="") as fh:
+        table = {
+            (int(r["seq"]), int(r["device_tick"]) % 2**32): float(r["true_time_s"])
+            for r in csv.DictReader(fh)
+            if r.get("sent") == "1"
+        }
+    return np.array(
+        [table.get((s % 65536, t // div % 2**32), np.nan) for s, t in zip(seq, ticks, strict=True)]
+    )
+
+
+def sync_error(
+    journal: Path, truths: Mapping[str, tuple[str, Path]], wiring: Mapping[str, int], out: Path
+) -> dict[str, Any]:
+    """Session times of the recording (written to ``out`` as ``export --timestamps``
+    does) against the truth: the largest residual after one affine map of all streams.
+
+    Parameters
+    ----------
+    truths : mapping
+        Stream name -> (family, truth CSV) of the streams to score.
+    """
+    timebase = recording_timebase(journal, wiring)
+    rows = write_timestamps(out, timebase)
+    t_all, s_all, who = [], [], []
+    for name, timing in timebase.streams.items():
+        if name not in truths:
+            continue
+        family, truth = truths[name]
+        t = _true_times(truth, family, timing.seq.tolist(), timing.ticks.tolist())
+        s = np.asarray(timing.time_s, dtype=np.float64)
+        ok = np.isfinite(t) & np.isfinite(s)
+        t_all.append(t[ok])
+        s_all.append(s[ok])
+        who += [name] * int(ok.sum())
+    if not who:
+        return {"timestamps": str(out), "rows": rows, "sync_error_us": None, "per_stream_us": {}}
+    t = np.concatenate(t_all)
+    s = np.concatenate(s_all)
+    a = np.c_[t - t.mean(), np.ones_like(t)]
+    coef = np.linalg.lstsq(a, s, rcond=None)[0]
+    residual = np.abs(s - a @ coef) * 1e6
+    names = np.array(who)
+    per = {n: round(float(residual[names == n].max()), 2) for n in dict.fromkeys(who)}
+    return {
+        "timestamps": str(out),
+        "rows": rows,
+        "sync_error_us": round(float(residual.max()), 2),
+        "per_stream_us": per,
+        "notes": list(timebase.notes),
+    }
+
+
+def score_reconstruction(
+    journal: Path, rig: Path, truth: Path, c3d: Path | None = None
+) -> dict[str, Any]:
+    """Reconstruct a recording with a rig (``spotlab reconstruct``'s path), optionally
+    write the trial as C3D, and score its markers against the simulator's truth CSV."""
+    result = reconstruct_file(journal, rig)
+    if c3d is not None:
+        write_trial(c3d, result.trial)
+    ticks = result.ticks if result.ticks is not None else np.zeros(0, np.int64)
+    true = read_truth_positions(truth).at_ticks(ticks)
+    error = np.linalg.norm(result.trial.points - true, axis=-1)
+    error = error[np.isfinite(error)]
+    return {
+        "c3d": str(c3d) if c3d is not None else None,
+        "markers_reconstructed": result.summary["markers_reconstructed"],
+        "rms_ray_px": result.summary["rms_ray_px"],
+        "error_rms_mm": float(np.sqrt(np.mean(error**2))) if error.size else None,
+        "error_max_mm": float(error.max()) if error.size else None,
+    }
+
+
+__all__ = ["device_figures", "score_reconstruction", "sync_error"]
