@@ -50,7 +50,10 @@ def sim_argv(device: SimDevice, scenario: Scenario, seed: int, folder: Path) -> 
     """``spotlab sim ...`` arguments of one device (without the executable)."""
     args = ["sim", device.family]
     port = device.sim.get("port")
-    args += ["--pty"] if device.transport == "pty" else ["--tcp", str(port or 0)]
+    if device.family not in SERIAL_FAMILIES:  # TCP/UDP servers: --port (0: any free one)
+        args += ["--port", str(port or 0)]
+    else:
+        args += ["--pty"] if device.transport == "pty" else ["--tcp", str(port or 0)]
     for key in SIM_SETTINGS[device.family]:
         if key in device.settings:
             args += [_option(key), str(device.settings[key])]
@@ -134,12 +137,13 @@ def start_simulators(scenario: Scenario, seed: int, folder: Path) -> list[Runnin
         line = line_of(text, ["device", device.index, *key])
         return ScenarioError(f"{scenario.path}:{line}: {dotted}: {message}")
 
+    for device in scenario.devices:  # before any starts: a busy port costs nothing
+        port = device.sim.get("port")
+        if isinstance(port, int) and port > 0 and not _port_free(port):
+            raise fail(device, ["sim", "port"], f"port {port} on 127.0.0.1 is busy")
     (folder / "lab").mkdir(parents=True, exist_ok=True)
     try:
         for device in scenario.devices:
-            port = device.sim.get("port")
-            if isinstance(port, int) and port > 0 and not _port_free(port):
-                raise fail(device, ["sim", "port"], f"port {port} on 127.0.0.1 is busy")
             out = folder / f"{device.name}.sim.stdout"
             err = folder / f"{device.name}.sim.stderr"
             argv = [*CLI, *sim_argv(device, scenario, seed, folder)]

@@ -134,6 +134,7 @@ def run_scenario(
     try:
         progress(f"starting {len(scenario.devices)} simulator(s)")
         sims = start_simulators(scenario, seed, folder)
+        summary["run"]["simulator_pids"] = {s.device.name: s.proc.pid for s in sims}
         lab = write_lab(scenario, sims, folder / "lab.toml")
         progress(f"recording {scenario.duration_s:g} s")
         summary["run"].update(_record(lab, journal, scenario.duration_s, folder))
