@@ -119,7 +119,11 @@ def _outcome(
             step, "failed", None, gap, "no gap in the frames: the disruption did not happen",
             _counters(driver),
         )  # fmt: skip
-    recovery = round((after[0] - end_ns) / 1e9, 3) if timed else None
+    # Frames still queued when the disruption began may arrive after it: recovery is
+    # the end of the longest gap that ends after the disruption.
+    ends = [i + 1 for i in range(len(arrivals) - 1) if arrivals[i + 1] > end_ns]
+    first = arrivals[max(ends, key=lambda i: arrivals[i] - arrivals[i - 1])] if ends else after[0]
+    recovery = round((first - end_ns) / 1e9, 3) if timed else None
     return StepResult(step, "recovered", recovery, round(gap, 3), "", _counters(driver))
 
 

@@ -5,8 +5,9 @@ arrival stamp (``arrival_ns``: the read that brought its last byte returned) and
 delivery stamp (the bench's sink saw it). From these:
 
 * the device clock against the host: a straight line fitted to arrival time
-  against device time (then again to the earlier half of the arrivals, the late
-  ones being the host's delays rather than the clock's). Its slope gives the
+  against device time through the lower envelope of the arrivals (the earliest
+  of each of 20 spans: the late ones are the host's delays, not the clock's;
+  the residuals are then all at or above the line). Its slope gives the
   drift (ppm, positive when the device clock runs slow against the host's), its
   value at the first frame the offset
   (host time minus device time there, which includes the transport's latency);
@@ -80,14 +81,17 @@ def clock_fit(stamps: FrameStamps) -> tuple[float, float, npt.NDArray[np.float64
         return float("nan"), float("nan"), np.zeros(len(stamps))
     device_s = (stamps.ticks - stamps.ticks[0]).astype(np.float64) / stamps.tick_hz
     host_s = (stamps.arrival_ns - stamps.arrival_ns[0]).astype(np.float64) / 1e9
-    slope, intercept = np.polyfit(device_s, host_s, 1)
-    # Refit to the earlier half of the arrivals: late ones are the host's delays, not
-    # the clock's (a read that waited, a thread switch).
-    early = host_s - (slope * device_s + intercept) <= np.median(
-        host_s - (slope * device_s + intercept)
-    )
-    if int(early.sum()) >= 3:
-        slope, intercept = np.polyfit(device_s[early], host_s[early], 1)
+    # The lower envelope: in each of about 20 spans of device time the earliest arrival
+    # (against the device clock) is the one the host delayed least; the line through
+    # them is the clock, the rest of each arrival is the host's delay.
+    spans = np.minimum((device_s / max(device_s[-1], 1e-9) * 20).astype(np.int64), 19)
+    lag = host_s - device_s
+    picks = [int(np.flatnonzero(spans == k)[np.argmin(lag[spans == k])])
+             for k in np.unique(spans)]  # fmt: skip
+    if len(picks) >= 3:
+        slope, intercept = np.polyfit(device_s[picks], host_s[picks], 1)
+    else:
+        slope, intercept = np.polyfit(device_s, host_s, 1)
     residual = (host_s - (slope * device_s + intercept)) * 1e9
     offset = (
         float(stamps.arrival_ns[0]) / 1e9

@@ -58,7 +58,7 @@ def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str,
     """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process."""
     out, err = folder / "record.stdout", folder / "record.stderr"
     argv = [*CLI, "record", "--lab", str(lab), "--seconds", f"{seconds:g}", "--out",
-            str(journal), "--json"]  # fmt: skip
+            str(journal), "--json", "--overwrite"]  # fmt: skip  (the run's own folder)
     with open(out, "wb") as fo, open(err, "wb") as fe:
         proc = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
     try:
@@ -86,7 +86,9 @@ def _process(
                   if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
         found = sync_error(journal, truths, scenario.wiring, folder / "timestamps.csv")
         run["sync_error_us"] = found["sync_error_us"]
+        run["sync_error_timed_us"] = found["sync_error_timed_us"]
         run["sync_error_per_stream_us"] = found["per_stream_us"]
+        run["timebase_notes"] = found["notes"]
     if "reconstruction" in scenario.steps:
         (sim,) = sims
         assert sim.rig is not None
@@ -140,7 +142,7 @@ def run_scenario(
         summary["run"].update(_record(lab, journal, scenario.duration_s, folder))
         codes = stop_simulators(sims)
         summary["run"]["simulator_exit_codes"] = codes
-        if summary["run"]["record_exit_code"] != 0 or not journal.is_file():
+        if not journal.is_file():  # a journal ended by an error is scored (record_exit_code)
             summary["problem"] = summary["run"]["record_error"] or "the recording failed"
         else:
             progress("processing and scoring against the truth")

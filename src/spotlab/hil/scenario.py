@@ -53,7 +53,7 @@ SERIAL_FAMILIES = ("selspot", "timer", "centroid")
 SIM_KEYS = (
     "seed", "faults", "clock_offset", "clock_drift_ppm", "clock_jitter", "clock_steps",
     "motion", "markers", "ghosts", "noise_blobs", "sunlight", "camera_off", "ring_phase",
-    "wand_length", "reflectance", "natnet_version", "password", "inputs", "port",
+    "wand_length", "reflectance", "natnet_version", "password", "inputs", "port", "seconds",
 )  # fmt: skip
 STEPS = ("timestamps", "reconstruction", "export")
 MOTIONS = ("wand", "cluster", "gait", "lframe")
@@ -64,6 +64,7 @@ DEVICE_FIGURES = ("frames", "frames_sent", "frames_missing", "lost_frames", "crc
 #: Figures of the run, and what each needs.
 RUN_FIGURES = {
     "sync_error_us": "a timer with wired inputs and the 'timestamps' step",
+    "sync_error_timed_us": "a timer with wired inputs and the 'timestamps' step",
     "error_3d_rms_mm": "a single device, a selspot, and the 'reconstruction' step",
     "error_3d_max_mm": "a single device, a selspot, and the 'reconstruction' step",
     "record_exit_code": "",
@@ -300,7 +301,7 @@ def _missing_for(
     figure: str, devices: tuple[SimDevice, ...], steps: tuple[str, ...], wiring: Mapping[str, int]
 ) -> str:
     """What ``figure`` needs that the scenario lacks ("" when nothing)."""
-    if figure == "sync_error_us" and (not wiring or "timestamps" not in steps):
+    if figure.startswith("sync_error") and (not wiring or "timestamps" not in steps):
         return RUN_FIGURES[figure]
     alone = len(devices) == 1 and devices[0].family == "selspot"
     if figure.startswith("error_3d") and (not alone or "reconstruction" not in steps):

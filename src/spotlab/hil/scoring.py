@@ -85,7 +85,9 @@ def sync_error(
     journal: Path, truths: Mapping[str, tuple[str, Path]], wiring: Mapping[str, int], out: Path
 ) -> dict[str, Any]:
     """Session times of the recording (written to ``out`` as ``export --timestamps``
-    does) against the truth: the largest residual after one affine map of all streams.
+    does) against the truth: the largest residual after one affine map of all streams
+    (``sync_error_us``), and the same of the frames timed by the timer's edges alone
+    (``sync_error_timed_us``: not those extrapolated after the timer stopped).
 
     Parameters
     ----------
@@ -94,19 +96,33 @@ def sync_error(
     """
     timebase = recording_timebase(journal, wiring)
     rows = write_timestamps(out, timebase)
-    t_all, s_all, who = [], [], []
-    for name, timing in timebase.streams.items():
-        if name not in truths:
-            continue
-        family, truth = truths[name]
-        t = _true_times(truth, family, timing.seq.tolist(), timing.ticks.tolist())
-        s = np.asarray(timing.time_s, dtype=np.float64)
-        ok = np.isfinite(t) & np.isfinite(s)
-        t_all.append(t[ok])
-        s_all.append(s[ok])
-        who += [name] * int(ok.sum())
-    if not who:
-        return {"timestamps": str(out), "rows": rows, "sync_error_us": None, "per_stream_us": {}}
+    found: dict[str, Any] = {"timestamps": str(out), "rows": rows, "notes": list(timebase.notes)}
+    for key, methods in (("", None), ("_timed", ("edge", "reference"))):
+        t_all, s_all, who = [], [], []
+        for name, timing in timebase.streams.items():
+            if name not in truths:
+                continue
+            family, truth = truths[name]
+            t = _true_times(truth, family, timing.seq.tolist(), timing.ticks.tolist())
+            s = np.asarray(timing.time_s, dtype=np.float64)
+            ok = np.isfinite(t) & np.isfinite(s)
+            if methods is not None:
+                ok &= np.isin(np.asarray(timing.method).astype(str), methods)
+            t_all.append(t[ok])
+            s_all.append(s[ok])
+            who += [name] * int(ok.sum())
+        found[f"sync_error{key}_us"], found[f"per_stream{key}_us"] = _affine_error(
+            t_all, s_all, who
+        )
+    return found
+
+
+def _affine_error(
+    t_all: list[F64], s_all: list[F64], who: list[str]
+) -> tuple[float | None, dict[str, float]]:
+    """Largest |session time - true time| after one affine map of all, in µs; per stream."""
+    if len(who) < 3:
+        return None, {}
     t = np.concatenate(t_all)
     s = np.concatenate(s_all)
     a = np.c_[t - t.mean(), np.ones_like(t)]
@@ -114,13 +130,7 @@ def sync_error(
     residual = np.abs(s - a @ coef) * 1e6
     names = np.array(who)
     per = {n: round(float(residual[names == n].max()), 2) for n in dict.fromkeys(who)}
-    return {
-        "timestamps": str(out),
-        "rows": rows,
-        "sync_error_us": round(float(residual.max()), 2),
-        "per_stream_us": per,
-        "notes": list(timebase.notes),
-    }
+    return round(float(residual.max()), 2), per
 
 
 def score_reconstruction(
