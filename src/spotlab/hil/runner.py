@@ -57,8 +57,18 @@ def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
 def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str, Any]:
     """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process."""
     out, err = folder / "record.stdout", folder / "record.stderr"
-    argv = [*CLI, "record", "--lab", str(lab), "--seconds", f"{seconds:g}", "--out",
-            str(journal), "--json", "--overwrite"]  # fmt: skip  (the run's own folder)
+    argv = [
+        *CLI,
+        "record",
+        "--lab",
+        str(lab),
+        "--seconds",
+        f"{seconds:g}",
+        "--out",
+        str(journal),
+        "--json",
+        "--overwrite",
+    ]  # fmt: skip  (the run's own folder)
     with open(out, "wb") as fo, open(err, "wb") as fe:
         proc = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
     try:
