@@ -27,6 +27,8 @@ CLI: tuple[str, ...] = (sys.executable, "-m", "spotlab.console.cli")
 SIM_SETTINGS = {"selspot": ("rate", "cameras", "leds"), "timer": ("rate",),
                 "centroid": ("rate", "cameras"), "qualisys": (), "natnet": ()}  # fmt: skip
 START_TIMEOUT_S = 30.0
+#: Families whose simulators publish frame pulses a timer's inputs can capture.
+PULSING_FAMILIES = (*SERIAL_FAMILIES, "qualisys")
 
 
 @dataclass
@@ -62,6 +64,7 @@ def sim_argv(device: SimDevice, scenario: Scenario, seed: int, folder: Path) -> 
     args += ["--truth", str(folder / f"{device.name}.truth{suffix}")]
     if device.family in SERIAL_FAMILIES:
         args += ["--fault-log", str(folder / f"{device.name}.faults.json")]
+    if device.family in PULSING_FAMILIES:
         args += ["--lab", str(folder / "lab"), "--lab-name", device.name]
     if device.family == "selspot":
         args += ["--rig-out", str(folder / f"{device.name}.rig.toml")]
