@@ -312,8 +312,10 @@ class Mcs1Driver(Driver):
             # program (another driver, `spotlab devices --probe`) finds it.
             self._link.write(encode_command("RESET"))
             # Let the command reach the device at the rate it was sent at before the
-            # host moves to 9600 baud (a USB adapter or a pty's reader may still hold it).
-            time.sleep(STOP_RESET_PAUSE_S)
+            # host moves to 9600 baud (a USB adapter or a pty's reader may still hold
+            # it; the in-process sim:// device has read it already).
+            if self.config.baud != RESET_BAUD and not str(self.port).startswith("sim://"):
+                time.sleep(STOP_RESET_PAUSE_S)
             self._link.set_baud(RESET_BAUD)
         except DeviceDisconnected as exc:
             log.warning("%s: port lost while stopping: %s", self.port, exc)

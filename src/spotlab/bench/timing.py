@@ -4,15 +4,15 @@ A frame has a device time (its ``ticks`` over the stream's tick rate), a host
 arrival stamp (``arrival_ns``: the read that brought its last byte returned) and a
 delivery stamp (the bench's sink saw it). From these:
 
-* the device clock against the host: a straight line fitted to arrival time
-  against device time through the lower envelope of the arrivals (the earliest
-  of each of 20 spans: the late ones are the host's delays, not the clock's;
-  the residuals are then all at or above the line). Its slope gives the
+* the device clock against the host: the straight line under every arrival
+  (against device time) that is closest to them on average, an edge of their
+  lower convex hull (the late arrivals are the host's delays, not the clock's:
+  every residual is at or above the line). Its slope gives the
   drift (ppm, positive when the device clock runs slow against the host's), its
   value at the first frame the offset
   (host time minus device time there, which includes the transport's latency);
-* frame-arrival jitter: what is left of the arrivals around that line (RMS, p99
-  of the absolute residual, peak to peak), in µs;
+* frame-arrival jitter: each arrival's delay above that line (its standard
+  deviation, its 99th percentile, peak to peak), in µs;
 * host latency per frame: delivery minus arrival, p50 / p99 / max in µs;
 * the measured frame rate and, where the line has a known capacity, the share
   of it the stream's bytes used.
@@ -20,6 +20,7 @@ delivery stamp (the bench's sink saw it). From these:
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,17 +82,7 @@ def clock_fit(stamps: FrameStamps) -> tuple[float, float, npt.NDArray[np.float64
         return float("nan"), float("nan"), np.zeros(len(stamps))
     device_s = (stamps.ticks - stamps.ticks[0]).astype(np.float64) / stamps.tick_hz
     host_s = (stamps.arrival_ns - stamps.arrival_ns[0]).astype(np.float64) / 1e9
-    # The lower envelope: in each of about 20 spans of device time the earliest arrival
-    # (against the device clock) is the one the host delayed least; the line through
-    # them is the clock, the rest of each arrival is the host's delay.
-    spans = np.minimum((device_s / max(device_s[-1], 1e-9) * 20).astype(np.int64), 19)
-    lag = host_s - device_s
-    picks = [int(np.flatnonzero(spans == k)[np.argmin(lag[spans == k])])
-             for k in np.unique(spans)]  # fmt: skip
-    if len(picks) >= 3:
-        slope, intercept = np.polyfit(device_s[picks], host_s[picks], 1)
-    else:
-        slope, intercept = np.polyfit(device_s, host_s, 1)
+    slope, intercept = _lower_support(device_s, host_s)
     residual = (host_s - (slope * device_s + intercept)) * 1e9
     offset = (
         float(stamps.arrival_ns[0]) / 1e9
@@ -99,6 +90,32 @@ def clock_fit(stamps: FrameStamps) -> tuple[float, float, npt.NDArray[np.float64
         - float(stamps.ticks[0]) / (stamps.tick_hz)
     )
     return (float(slope) - 1.0) * 1e6, offset, residual
+
+
+def _lower_support(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> tuple[float, float]:
+    """The line under every point ``(x, y)`` closest to them on average.
+
+    It is the edge of the points' lower convex hull above their mean ``x`` (the
+    solution of: maximise the line's mean height subject to staying under every
+    point), the host's least-delayed arrivals.
+    """
+    order = np.lexsort((y, x))
+    hull: list[int] = []
+    for i in order.tolist():
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            cross = (x[b] - x[a]) * (y[i] - y[a]) - (y[b] - y[a]) * (x[i] - x[a])
+            if cross > 0:
+                break
+            hull.pop()
+        hull.append(i)
+    mean = float(np.mean(x))
+    for a, b in itertools.pairwise(hull):
+        if x[a] <= mean <= x[b] and x[b] > x[a]:
+            slope = float((y[b] - y[a]) / (x[b] - x[a]))
+            return slope, float(y[a] - slope * x[a])
+    slope, intercept = np.polyfit(x, y, 1)
+    return float(slope), float(intercept)
 
 
 def stream_figures(
@@ -142,7 +159,7 @@ def stream_figures(
         "frames": n,
         "rate_hz": round(rate, 3),
         "nominal_rate_hz": nominal_rate_hz,
-        "jitter_rms_us": _round(float(np.sqrt(np.mean(residual**2))) / 1e3 if n >= 3 else None),
+        "jitter_rms_us": _round(float(np.std(residual)) / 1e3 if n >= 3 else None),
         "jitter_p99_us": _round(
             float(np.percentile(np.abs(residual), 99.0)) / 1e3 if n >= 3 else None
         ),
