@@ -254,6 +254,8 @@ CASES: list[Case] = [
         ("--report", "is a file"),
     ),
     ("bench-family", lambda f: ["bench", "x", "--driver", "lsl"], ("no conformance suite",)),
+    ("hil-missing", lambda f: ["hil", "run", str(f["dir"] / "none.toml")], ("none.toml",)),
+    ("hil-usage", lambda f: ["hil"], ("hil:",)),
 ]
 
 

@@ -22,7 +22,7 @@ def add_parser(sub: Any) -> None:
         "them, the processing steps run as spotlab export does, and everything is scored "
         "against the simulators' truth at the end. Exit 1 when a criterion fails.",
     )
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    actions = p.add_subparsers(dest="action", metavar="ACTION", help="run or list")
     actions.required = True
     run = actions.add_parser("run", help="run a scenario file (or a shipped scenario's name)")
     run.add_argument("scenario", help="SCENARIO.toml, or the name of a shipped scenario")
