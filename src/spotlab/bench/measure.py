@@ -83,24 +83,40 @@ def line_capacity(driver: Driver) -> float | None:
     return float(baud) * 1.0 if isinstance(baud, int) and baud > 0 else None
 
 
+#: Seconds of frames left out at the start (a backlog read in a burst, a first read).
+WARMUP_S = 0.5
+
+
+def _after_warmup(stamps: FrameStamps) -> FrameStamps:
+    """The frames that arrived :data:`WARMUP_S` or more after the first."""
+    if len(stamps) == 0:
+        return stamps
+    keep = stamps.arrival_ns >= stamps.arrival_ns[0] + int(WARMUP_S * 1e9)
+    return FrameStamps(
+        stamps.ticks[keep], stamps.tick_hz, stamps.arrival_ns[keep], stamps.delivered_ns[keep]
+    )
+
+
 COUNTERS = ("lost_frames", "crc_errors", "resyncs", "duplicates", "reconnects")
 
 
 def measure(drivers: Sequence[Driver], seconds: float) -> list[StreamResult]:
-    """Stream ``drivers`` together for ``seconds`` and return their figures.
+    """Stream ``drivers`` together for ``seconds`` (after :data:`WARMUP_S` not measured)
+    and return their figures; the throughput counts every byte of the run.
 
     The drivers are started and closed here.
     """
     sink = StampSink()
     session = Session(list(drivers), [sink], close_devices=True)
-    session.run_for(seconds)
+    session.run_for(seconds + WARMUP_S)
     results = []
     for driver in drivers:
         spec = driver.spec
-        stamps = sink.stamps(driver.name, float(spec.tick_hz))
+        stamps = _after_warmup(sink.stamps(driver.name, float(spec.tick_hz)))
         figures: dict[str, Any] = stream_figures(
-            stamps, seconds, float(spec.rate_hz), driver.stats.bytes, line_capacity(driver)
-        )
+            stamps, seconds + WARMUP_S, float(spec.rate_hz), driver.stats.bytes,
+            line_capacity(driver),
+        )  # fmt: skip
         for key in COUNTERS:
             figures[key] = int(getattr(driver.stats, key))
         errors = [str(e.error) for e in session.errors if e.stream == driver.name]
