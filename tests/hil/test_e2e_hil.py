@@ -12,6 +12,8 @@ import json
 import os
 import signal
 import socket
+import subprocess
+import sys
 import time
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -127,3 +129,19 @@ def test_a_busy_port_and_an_unknown_key_are_one_line_naming_file_line_and_key(
     result = run_cli("hil", "run", path, timeout=60)
     assert_one_clear_error(result, f"{path}:15:", "device[0].lenses", "unknown key")
     assert "hil-one" not in os.listdir(Path.cwd())  # refused before any output
+
+
+def test_pytest_hil_collects_scenarios_by_name_and_folder_and_nothing_else(
+    tmp_path: Path,
+) -> None:
+    _scenario(tmp_path, 3.0)
+    result = subprocess.run(
+        [sys.executable, "-m", "pytest", "--hil", "gait-lab", "--hil", str(tmp_path),
+         "--collect-only", "-q", "-p", "no:randomly"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stdout + result.stderr
+    collected = [line for line in result.stdout.splitlines() if "::" in line]
+    assert len(collected) == 2, result.stdout
+    assert any(line.endswith("::gait-lab") for line in collected), collected
+    assert any(line.endswith("one.toml::one") for line in collected), collected
