@@ -1,9 +1,9 @@
 """The bench's report: ``report.json``, ``report.html`` and one PNG of plots per device.
 
-The plots (matplotlib, Agg backend, no display needed) show, per device, the
-arrivals' residual around the fitted device clock against time (jitter and
-drift left over), the histogram of host latency per frame, and the intervals
-between arrivals.
+The plots (matplotlib, Agg backend, no display needed) show, per device, each
+arrival's delay above the device clock's line (:func:`~spotlab.bench.timing.clock_fit`)
+against time, the histogram of host latency per frame, and the intervals between
+arrivals.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def plot_stream(stamps: FrameStamps, title: str, path: Path) -> Path:
             axes[1].set_yscale("log")
             intervals = np.diff(stamps.arrival_ns) / 1e6
             axes[2].plot(t[1:], intervals, ".", ms=2)
-        axes[0].set(title="arrival - fitted device clock", xlabel="s", ylabel="µs")
+        axes[0].set(title="arrival delay above the device clock", xlabel="s", ylabel="µs")
         axes[1].set(title="host latency per frame", xlabel="µs", ylabel="frames")
         axes[2].set(title="interval between arrivals", xlabel="s", ylabel="ms")
         fig.suptitle(title)
