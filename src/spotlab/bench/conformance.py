@@ -180,7 +180,9 @@ def run_suite(family: str, port: str, select: str | None = None) -> tuple[list[T
         if select:
             args += ["-k", select]
         with contextlib.redirect_stdout(out):
-            pytest.main(args, plugins=[collector])
+            code = pytest.main(args, plugins=[collector])
+    if code == pytest.ExitCode.INTERRUPTED:  # pytest caught the Ctrl-C: pass it on
+        raise KeyboardInterrupt
     outcomes = [
         TestOutcome(name, e["outcome"], e["reason"], round(e["seconds"], 3))
         for name, e in collector.tests.items()
