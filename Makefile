@@ -39,7 +39,7 @@ test: lint typecheck layers unit
 
 # The shipped hardware-in-the-loop scenarios (docs/hil.md), each a pytest test through
 # the --hil option; the 1 h soak is left out (spotlab hil run soak).
-HIL_SCENARIOS := gait-lab fault-storm clock-torture scaled-lab
+HIL_SCENARIOS := gait-lab fault-storm clock-torture scaled-lab labelled-hub
 hil: $(STAMP)
 	$(BIN)/python -m pytest $(addprefix --hil ,$(HIL_SCENARIOS))
 

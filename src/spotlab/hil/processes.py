@@ -66,10 +66,12 @@ def sim_argv(device: SimDevice, scenario: Scenario, seed: int, folder: Path) -> 
         args += ["--fault-log", str(folder / f"{device.name}.faults.json")]
     if device.family in PULSING_FAMILIES:
         args += ["--lab", str(folder / "lab"), "--lab-name", device.name]
-    if device.family == "selspot":
+    if device.family in ("selspot", "centroid"):
         args += ["--rig-out", str(folder / f"{device.name}.rig.toml")]
-        if scenario.motion is not None and "motion" not in device.sim:
-            args += ["--motion", scenario.motion]
+    if device.family == "centroid":
+        args += ["--model-out", str(folder / f"{device.name}.model.json")]
+    if device.family == "selspot" and scenario.motion is not None and "motion" not in device.sim:
+        args += ["--motion", scenario.motion]
     for key, value in device.sim.items():
         if key in ("seed", "port"):
             continue
@@ -158,7 +160,8 @@ def start_simulators(scenario: Scenario, seed: int, folder: Path) -> list[Runnin
                     device, proc, "", folder / f"{device.name}.truth{suffix}",
                     folder / f"{device.name}.faults.json" if device.family in SERIAL_FAMILIES
                     else None,
-                    folder / f"{device.name}.rig.toml" if device.family == "selspot" else None,
+                    folder / f"{device.name}.rig.toml"
+                    if device.family in ("selspot", "centroid") else None,
                     err,
                 )
             )  # fmt: skip

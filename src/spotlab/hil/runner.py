@@ -25,6 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from spotlab.hil.labelling import score_labelling
 from spotlab.hil.processes import CLI, RunningSim, start_simulators, stop_simulators
 from spotlab.hil.report import write_html, write_junit, write_summary
 from spotlab.hil.scenario import Scenario
@@ -41,8 +42,11 @@ def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
     lines = []
     if scenario.rig is not None:
         lines.append(f"rig = {json.dumps(str(scenario.rig))}")
-    if scenario.model is not None:
-        lines.append(f"model = {json.dumps(str(scenario.model))}")
+    model = scenario.model
+    if model is None and "labelling" in scenario.steps:  # the hub simulator's own model
+        model = sims[0].truth.parent / f"{sims[0].device.name}.model.json"
+    if model is not None:
+        lines.append(f"model = {json.dumps(str(model))}")
     for sim in sims:
         d = sim.device
         lines += ["", "[[device]]", f"family = {json.dumps(d.family)}",
@@ -107,6 +111,13 @@ def _process(
         run["error_3d_rms_mm"] = found["error_rms_mm"]
         run["error_3d_max_mm"] = found["error_max_mm"]
         run["markers_reconstructed"] = found["markers_reconstructed"]
+        if c3d is not None:
+            run["c3d"] = str(c3d)
+    if "labelling" in scenario.steps:
+        (sim,) = sims
+        assert sim.rig is not None
+        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
+        run.update(score_labelling(journal, sim.rig, sim.truth, c3d))
         if c3d is not None:
             run["c3d"] = str(c3d)
     return run

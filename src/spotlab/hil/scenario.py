@@ -55,7 +55,7 @@ SIM_KEYS = (
     "motion", "markers", "ghosts", "noise_blobs", "sunlight", "camera_off", "ring_phase",
     "wand_length", "reflectance", "natnet_version", "password", "inputs", "port", "seconds",
 )  # fmt: skip
-STEPS = ("timestamps", "reconstruction", "export")
+STEPS = ("timestamps", "reconstruction", "labelling", "export")
 MOTIONS = ("wand", "cluster", "gait", "lframe")
 #: Figures of every device (docs/hil.md).
 DEVICE_FIGURES = ("frames", "frames_sent", "frames_missing", "lost_frames", "crc_errors",
@@ -67,6 +67,9 @@ RUN_FIGURES = {
     "sync_error_timed_us": "a timer with wired inputs and the 'timestamps' step",
     "error_3d_rms_mm": "a single device, a selspot, and the 'reconstruction' step",
     "error_3d_max_mm": "a single device, a selspot, and the 'reconstruction' step",
+    "labelled_fraction": "a single device, a centroid hub, and the 'labelling' step",
+    "wrong_label_fraction": "a single device, a centroid hub, and the 'labelling' step",
+    "label_error_rms_mm": "a single device, a centroid hub, and the 'labelling' step",
     "record_exit_code": "",
 }
 BOUNDS = ("min", "max")
@@ -306,6 +309,9 @@ def _missing_for(
     alone = len(devices) == 1 and devices[0].family == "selspot"
     if figure.startswith("error_3d") and (not alone or "reconstruction" not in steps):
         return RUN_FIGURES[figure]
+    hub = len(devices) == 1 and devices[0].family == "centroid"
+    if "label" in figure and (not hub or "labelling" not in steps):
+        return RUN_FIGURES[figure]
     return ""
 
 
@@ -367,8 +373,10 @@ def load_scenario(
     steps = processing.get("steps", [])
     if not isinstance(steps, list) or any(s not in STEPS for s in steps):
         raise c.fail(["processing", "steps"], f"expected a list of {', '.join(STEPS)}")
-    if "export" in steps and "reconstruction" not in steps:
+    if "export" in steps and not {"reconstruction", "labelling"} & set(steps):
         raise c.fail(["processing", "steps"], "'export' writes the reconstruction: add it")
+    if "labelling" in steps and not (len(devices) == 1 and devices[0].family == "centroid"):
+        raise c.fail(["processing", "steps"], "'labelling' takes a single centroid device")
     if "reconstruction" in steps and not (len(devices) == 1 and devices[0].family == "selspot"):
         raise c.fail(["processing", "steps"], "'reconstruction' takes a single selspot device")
     criteria = _criteria(c, data.get("criteria"), devices, tuple(steps), wiring)

@@ -96,6 +96,8 @@ def test_simulator_arguments(tmp_path: Path) -> None:
         ("duration = 3.0", "duration = -1", ":2: duration: must be positive"),
         ('kind = "wand"', 'c3d = "nowhere.c3d"', ":6: motion.c3d: no such file"),
         ("rate = 200", "rate = [1, 2]", ":19: device[1].rate: expected a number"),
+        ('steps = ["timestamps"]', 'steps = ["labelling"]', "takes a single centroid device"),
+        ('steps = ["timestamps"]', 'steps = ["export"]', "'export' writes the reconstruction"),
     ],
 )
 def test_bad_input_names_file_line_and_key(tmp_path: Path, old: str, new: str, where: str) -> None:
