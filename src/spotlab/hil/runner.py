@@ -29,7 +29,7 @@ from spotlab.hil.labelling import score_labelling
 from spotlab.hil.processes import CLI, RunningSim, start_simulators, stop_simulators
 from spotlab.hil.report import write_html, write_junit, write_summary
 from spotlab.hil.scenario import Scenario
-from spotlab.hil.scoring import device_figures, score_reconstruction, sync_error
+from spotlab.hil.scoring import device_figures, frame_latency, score_reconstruction, sync_error
 
 
 def _toml_value(value: Any) -> str:
@@ -169,6 +169,10 @@ def run_scenario(
             progress("processing and scoring against the truth")
             logs = {s.device.name: s.fault_log for s in sims}
             summary["devices"] = device_figures(journal, logs)
+            truths = {s.device.name: (s.device.family, s.truth) for s in sims
+                      if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
+            for name, figures in frame_latency(journal, truths).items():
+                summary["devices"].setdefault(name, {}).update(figures)
             summary["run"].update(_process(scenario, sims, journal, folder))
     except KeyboardInterrupt:
         summary["problem"] = "interrupted (Ctrl-C): partial report"

@@ -60,7 +60,8 @@ MOTIONS = ("wand", "cluster", "gait", "lframe")
 #: Figures of every device (docs/hil.md).
 DEVICE_FIGURES = ("frames", "frames_sent", "frames_missing", "lost_frames", "crc_errors",
                   "resyncs", "duplicates", "gaps", "reconnects", "faults_injected",
-                  "rate_hz")  # fmt: skip
+                  "rate_hz", "latency_p50_ms", "latency_p99_ms", "latency_max_ms",
+                  "startup_backlog_ms")  # fmt: skip
 #: Figures of the run, and what each needs.
 RUN_FIGURES = {
     "sync_error_us": "a timer with wired inputs and the 'timestamps' step",

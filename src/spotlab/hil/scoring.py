@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from spotlab.acquisition.replay import replay
 from spotlab.acquisition.summary import summarize
 from spotlab.processing.decoding import decoder_for
 from spotlab.processing.session_times import recording_timebase, write_timestamps
@@ -28,6 +29,8 @@ from spotlab.processing.trajectories import reconstruct_file, write_trial
 from spotlab.simulators.truth import read_truth_positions
 
 F64 = npt.NDArray[np.float64]
+#: Seconds at the start of a stream whose frames are not in the latency figures.
+STARTUP_S = 1.0
 _COUNTS = ("frames", "lost_frames", "crc_errors", "resyncs", "duplicates", "gaps", "reconnects")
 
 
@@ -63,6 +66,51 @@ def device_figures(
             figures["frames_missing"] = max(0.0, sent - unusable - float(stream.frames))
             figures["faults_injected"] = float(len(log.get("faults", [])))
         out[stream.name] = figures
+    return out
+
+
+def frame_latency(journal: Path, truths: Mapping[str, tuple[str, Path]]) -> dict[str, Any]:
+    """Age of every frame when the host read its last byte: its arrival stamp in the
+    recording minus the true instant of its first sample (both on the host's monotonic
+    clock, which every process shares), p50 / p99 / max in ms per stream.
+
+    It holds the device's exposure and readout, the frame's time on the line and the
+    host's read; not the decoding after it (``spotlab bench`` measures that). The
+    frames of a stream's first :data:`STARTUP_S` are left out: the recorder starts its
+    devices one after the other, and the first device's first frames wait in its port
+    while the others start (``startup_backlog_ms``: the oldest of them).
+    """
+    seqs: dict[str, list[Any]] = {}
+    ticks: dict[str, list[Any]] = {}
+    arrivals: dict[str, list[Any]] = {}
+    for stream, block in replay(journal, decoder_for):
+        if stream not in truths or not len(block):
+            continue
+        seqs.setdefault(stream, []).append(np.asarray(block.seq))
+        ticks.setdefault(stream, []).append(np.asarray(block.ticks))
+        arrivals.setdefault(stream, []).append(np.asarray(block.arrival_ns))
+    out: dict[str, Any] = {}
+    for stream, (family, truth) in truths.items():
+        if stream not in seqs:
+            continue
+        seq = np.concatenate(seqs[stream]).astype(np.int64)
+        tick = np.concatenate(ticks[stream]).astype(np.int64)
+        arrival = np.concatenate(arrivals[stream]).astype(np.float64) / 1e9
+        age_ms = (arrival - _true_times(truth, family, seq.tolist(), tick.tolist())) * 1e3
+        early = arrival - arrival[0] < STARTUP_S
+        ok = np.isfinite(age_ms)
+        steady = age_ms[ok & ~early]
+        figures: dict[str, float | None] = {
+            "startup_backlog_ms": round(float(age_ms[ok & early].max()), 3)
+            if (ok & early).any()
+            else None
+        }
+        if steady.size:
+            p50, p99 = np.percentile(steady, [50.0, 99.0])
+            figures.update(latency_p50_ms=round(float(p50), 3),
+                           latency_p99_ms=round(float(p99), 3),
+                           latency_max_ms=round(float(steady.max()), 3))  # fmt: skip
+        out[stream] = figures
     return out
 
 
@@ -154,4 +202,4 @@ def score_reconstruction(
     }
 
 
-__all__ = ["device_figures", "score_reconstruction", "sync_error"]
+__all__ = ["device_figures", "frame_latency", "score_reconstruction", "sync_error"]
