@@ -124,6 +124,25 @@ def stop_simulators(sims: Sequence[RunningSim], wait_s: float = 15.0) -> dict[st
     return codes
 
 
+def check_ports(scenario: Scenario) -> None:
+    """Refuse a scenario whose fixed TCP ports are taken.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the file, the line and the device's ``sim.port``.
+    """
+    text = scenario.path.read_text(encoding="utf-8")
+    for device in scenario.devices:
+        port = device.sim.get("port")
+        if isinstance(port, int) and port > 0 and not _port_free(port):
+            key: list[str | int] = ["device", device.index, "sim", "port"]
+            raise ScenarioError(
+                f"{scenario.path}:{line_of(text, key)}: device[{device.index}].sim.port: "
+                f"port {port} on 127.0.0.1 is busy"
+            )
+
+
 def start_simulators(scenario: Scenario, seed: int, folder: Path) -> list[RunningSim]:
     """Start every simulator of ``scenario`` and wait for its address.
 
@@ -142,10 +161,7 @@ def start_simulators(scenario: Scenario, seed: int, folder: Path) -> list[Runnin
         line = line_of(text, ["device", device.index, *key])
         return ScenarioError(f"{scenario.path}:{line}: {dotted}: {message}")
 
-    for device in scenario.devices:  # before any starts: a busy port costs nothing
-        port = device.sim.get("port")
-        if isinstance(port, int) and port > 0 and not _port_free(port):
-            raise fail(device, ["sim", "port"], f"port {port} on 127.0.0.1 is busy")
+    check_ports(scenario)  # before any starts: a busy port costs nothing
     (folder / "lab").mkdir(parents=True, exist_ok=True)
     try:
         for device in scenario.devices:
@@ -181,4 +197,4 @@ def start_simulators(scenario: Scenario, seed: int, folder: Path) -> list[Runnin
     return sims
 
 
-__all__ = ["RunningSim", "sim_argv", "start_simulators", "stop_simulators"]
+__all__ = ["RunningSim", "check_ports", "sim_argv", "start_simulators", "stop_simulators"]

@@ -26,7 +26,13 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.hil.labelling import score_labelling
-from spotlab.hil.processes import CLI, RunningSim, start_simulators, stop_simulators
+from spotlab.hil.processes import (
+    CLI,
+    RunningSim,
+    check_ports,
+    start_simulators,
+    stop_simulators,
+)
 from spotlab.hil.report import write_html, write_junit, write_summary
 from spotlab.hil.scenario import Scenario
 from spotlab.hil.scoring import device_figures, frame_latency, score_reconstruction, sync_error
@@ -143,7 +149,14 @@ def run_scenario(
     junit: Path | None = None,
     progress: Callable[[str], None] = lambda _: None,
 ) -> dict[str, Any]:
-    """Run ``scenario`` with its outputs in ``folder``; returns the summary (``verdict``)."""
+    """Run ``scenario`` with its outputs in ``folder``; returns the summary (``verdict``).
+
+    Raises
+    ------
+    ScenarioError
+        A fixed port is busy (nothing is written then), or a simulator does not start.
+    """
+    check_ports(scenario)
     folder.mkdir(parents=True, exist_ok=True)
     seed = scenario.seed if seed is None else seed
     started = time.monotonic()
