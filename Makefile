@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: demo test lint typecheck layers unit long bench bench-gcvspline fuzz clean
+.PHONY: demo test lint typecheck layers unit long hil bench bench-gcvspline fuzz clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "spotlab needs Python 3.11 or newer"'
@@ -44,6 +44,12 @@ long: $(STAMP)
 	$(BIN)/python -m pytest -m long
 
 test: lint typecheck layers unit
+
+# The shipped hardware-in-the-loop scenarios (docs/hil.md), each a pytest test through
+# the --hil option; the 1 h soak is left out (spotlab hil run soak).
+HIL_SCENARIOS := gait-lab fault-storm clock-torture scaled-lab labelled-hub
+hil: $(STAMP)
+	$(BIN)/python -m pytest $(addprefix --hil ,$(HIL_SCENARIOS))
 
 bench: $(STAMP)
 	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,bench]'

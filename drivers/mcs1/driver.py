@@ -50,6 +50,9 @@ from spotlab.drivers.mcs1.contracts import Mcs1Config, Mcs1Decoder
 from spotlab.drivers.mcs1.link import SerialLink
 from spotlab.drivers.mcs1.session import CommandChannel
 
+#: Seconds between the last ``RESET:`` at the streaming rate and the move to 9600 baud.
+STOP_RESET_PAUSE_S = 0.05
+
 log = logging.getLogger(__name__)
 
 #: Pause between two reconnection attempts (s).
@@ -308,6 +311,11 @@ class Mcs1Driver(Driver):
             # Leave the device as it powers up (9600 baud, its defaults), where the next
             # program (another driver, `spotlab devices --probe`) finds it.
             self._link.write(encode_command("RESET"))
+            # Let the command reach the device at the rate it was sent at before the
+            # host moves to 9600 baud (a USB adapter or a pty's reader may still hold
+            # it; the in-process sim:// device has read it already).
+            if self.config.baud != RESET_BAUD and not str(self.port).startswith("sim://"):
+                time.sleep(STOP_RESET_PAUSE_S)
             self._link.set_baud(RESET_BAUD)
         except DeviceDisconnected as exc:
             log.warning("%s: port lost while stopping: %s", self.port, exc)

@@ -7,11 +7,8 @@ exposure and blob tables are in the description.
 
 from __future__ import annotations
 
-from spotlab.testing.mcs1_conformance import Mcs1Conformance
-from spotlab.testing.mcs1_families import CENTROID
+from spotlab.testing.family_conformance import CentroidConformance
 
 
-class TestCentroidConformance(Mcs1Conformance):
+class TestCentroidConformance(CentroidConformance):
     """Every test of the MCS-1 suite against ``device_port``."""
-
-    family = CENTROID

@@ -1,43 +1,14 @@
 """SPX conformance: the simulator in CI, a real device with ``--hw selspot=PORT``.
 
 The shared MCS-1 suite (:mod:`spotlab.testing.mcs1_conformance`) with the SPX
-description, and the SPX-only tests: the LED table and the slot timing.
+description, and the SPX-only tests (the LED table and the slot timing), in
+:mod:`spotlab.testing.family_conformance` where ``spotlab bench`` runs them too.
 """
 
 from __future__ import annotations
 
-import serial
-
-from spotlab.testing.mcs1_conformance import Mcs1Conformance
-from spotlab.testing.mcs1_families import SELSPOT
-from spotlab.testing.wire import ask
-
-ERROR_OUT_OF_RANGE = "ERROR23"
-ERROR_BAD_LED_TABLE = "ERROR81"
-ERROR_NOT_CONFIGURED = "ERROR82"
+from spotlab.testing.family_conformance import SelspotConformance
 
 
-class TestSelspotConformance(Mcs1Conformance):
+class TestSelspotConformance(SelspotConformance):
     """Every test of the MCS-1 suite, and the SPX ones, against ``device_port``."""
-
-    family = SELSPOT
-
-    def test_bad_led_tables_are_error_81(self, link: serial.Serial) -> None:
-        assert ask(link, "LEDT:0080") == "OKAY"
-        assert ask(link, "LEDT:00800080") == ERROR_BAD_LED_TABLE  # id twice
-        assert ask(link, "LEDT:8080") == ERROR_BAD_LED_TABLE  # id above 7F
-        assert ask(link, "LEDT:008") == ERROR_BAD_LED_TABLE  # not a multiple of 4
-
-    def test_led_table_reads_back(self, link: serial.Serial) -> None:
-        assert ask(link, "LEDT:008005C01140") == "OKAY"
-        assert ask(link, "LEDQ:") == "LEDQ 008005C01140"
-
-    def test_start_without_led_table_is_error_82(self, link: serial.Serial) -> None:
-        assert ask(link, "START:") == ERROR_NOT_CONFIGURED
-
-    def test_timing_is_checked_at_start(self, link: serial.Serial) -> None:
-        # 128 LEDs of 100 us slots take 12.9 ms: 100 Hz frames cannot hold them.
-        table = "".join(f"{i:02X}80" for i in range(128))
-        assert ask(link, f"LEDT:{table}") == "OKAY"
-        assert ask(link, "RATE:100000") == "OKAY"
-        assert ask(link, "START:") == ERROR_OUT_OF_RANGE

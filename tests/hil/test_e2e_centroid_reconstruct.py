@@ -4,7 +4,7 @@
 
 The C3D frames are the hub's: C3D frame ``first_frame + i`` is hub frame
 ``first_frame - 1 + i`` (a lost frame is a gap in its place), the truth's ``frame_no``
-of the recording's stream (see ``_truth_of_frames``).
+of the recording's stream (see :func:`spotlab.hil.labelling.truth_of_frames`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -21,6 +20,7 @@ from _e2e import assert_one_clear_error, run_cli, spawn_cli, stop_process
 from numpy.typing import NDArray
 
 from spotlab.geometry import Rig
+from spotlab.hil.labelling import truth_of_frames
 from spotlab.io import read_c3d
 
 CAMERAS, MARKERS, RATE_HZ, SECONDS = 8, 40, 300, 3
@@ -95,7 +95,7 @@ def test_reconstruct_labels_the_markers_of_the_truth(run: Run) -> None:
     assert trial.labels == [str(x) for x in truth["labels"]]
     assert trial.point_rate == RATE_HZ
     assert summary["decoded_frames"] >= 100, summary
-    X, T = trial.points, _truth_of_frames(trial.first_frame, trial.n_frames, truth)
+    X, T = trial.points, truth_of_frames(trial.first_frame, trial.n_frames, RATE_HZ, truth)
     err = np.linalg.norm(X - T, axis=-1)
     decoded = np.isfinite(X[..., 0]).any(axis=1)
     assert np.isfinite(T[decoded]).all(), "C3D frames the simulator never took"
@@ -115,25 +115,6 @@ def test_reconstruct_labels_the_markers_of_the_truth(run: Run) -> None:
     assert (err[reported] > 20.0).sum() <= 0.001 * reported.sum()  # wrong labels
     assert rms < 1.0
     assert abs(summary["labelled_fraction"] - reported[decoded].mean()) < 0.01
-
-
-def _truth_of_frames(first_frame: int, n_frames: int, truth: Any) -> FloatArray:
-    """True markers (F, M, 3) at the C3D frames, NaN where the simulator took none.
-
-    C3D frame ``first_frame + i`` is hub frame ``first_frame - 1 + i`` of the recording's
-    first stream (the first ``START:``), ``i`` frame periods of the hub's clock after it
-    (a stream restarted after an outage goes on in the hub's time).
-    """
-    first = np.flatnonzero(
-        (truth["stream"] == truth["stream"][0]) & (truth["frame_no"] == first_frame - 1)
-    )[0]
-    ticks = truth["hub_tick_us"].astype(np.float64)
-    want = ticks[first] + np.arange(n_frames) * 1e6 / RATE_HZ
-    k = np.clip(np.searchsorted(ticks, want), 1, ticks.size - 1)
-    k = np.where(np.abs(ticks[k - 1] - want) < np.abs(ticks[k] - want), k - 1, k)
-    out = truth["markers_mm"][k].astype(np.float64)
-    out[np.abs(ticks[k] - want) > 0.25e6 / RATE_HZ] = np.nan
-    return np.asarray(out)
 
 
 @pytest.mark.timeout(60)

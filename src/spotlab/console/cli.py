@@ -36,6 +36,8 @@ COMMANDS: dict[str, str] = {
     "model": "learn, show, check or init a marker model for identification",
     "export": "write a recording or a trial file as C3D or TRC",
     "demo": "simulated system end to end: record with faults, decode, report",
+    "bench": "run a device's conformance suite and measure its timing, with a report",
+    "hil": "run a hardware-in-the-loop scenario of simulators, or list the shipped ones",
     "udev": "install or check the udev rules for USB-serial adapters and OAK cameras",
     "console": "serve the lab acquisition console, a live web page (devices, views, trials)",
 }

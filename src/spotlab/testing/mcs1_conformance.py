@@ -26,7 +26,7 @@ from spotlab.core.errors import DeviceError
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers.mcs1.driver import Mcs1Driver
 from spotlab.testing.pytest_plugin import hardware_ports
-from spotlab.testing.wire import ask, check_reply, command, read_until, reset
+from spotlab.testing.wire import BANNER, ask, check_reply, command, read_until, reset
 
 #: Device code of ``ERRORxx`` "not allowed in this mode" (a configuration while streaming).
 NOT_IN_THIS_MODE = 0x0C
@@ -160,6 +160,9 @@ class Mcs1Conformance:
                 port.write(command("STOP:"))
                 port.write(command("RESET:"))
                 port.flush()
+                # Wait for the banner: a device that is its own process (a simulator on a
+                # pty) would otherwise send it to the next test's port as a stale reply.
+                read_until(port, BANNER, 1.0)
             finally:
                 port.close()
 

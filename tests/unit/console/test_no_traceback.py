@@ -276,6 +276,15 @@ CASES: list[Case] = [
         ("missing.toml",),
     ),
     ("console-port", lambda f: ["console", "--sim", "--port", "70000"], ("--port",)),
+    ("bench-usage", lambda f: ["bench"], ("nothing to bench",)),
+    (
+        "bench--report",
+        lambda f: ["bench", "sim://selspot", "--driver", "selspot", "--report", str(f["plain"])],
+        ("--report", "is a file"),
+    ),
+    ("bench-family", lambda f: ["bench", "x", "--driver", "lsl"], ("no conformance suite",)),
+    ("hil-missing", lambda f: ["hil", "run", str(f["dir"] / "none.toml")], ("none.toml",)),
+    ("hil-usage", lambda f: ["hil"], ("hil:",)),
 ]
 
 

@@ -22,11 +22,10 @@ from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.console.errors import CommandError
 from spotlab.console.progress import Progress
 from spotlab.drivers.selspot import SelspotDriver
+from spotlab.hil.scoring import score_reconstruction
 from spotlab.processing.decoding import decoder_for
 from spotlab.processing.paths import check_output_dir
-from spotlab.processing.trajectories import reconstruct_file, write_trial
 from spotlab.simulators import service
-from spotlab.simulators.truth import read_truth_positions
 
 CAMERAS, LEDS, RATE_HZ = 4, 32, 200.0
 # One of each link fault a serial line shows, at known times after START.
@@ -66,23 +65,6 @@ def _valid_fraction(journal: Path) -> float:
         valid += int(ok.sum())
         total += ok.size
     return valid / total if total else 0.0
-
-
-def _reconstruct(journal: Path, rig: Path, truth: Path, c3d: Path) -> dict[str, Any]:
-    """Reconstruct the recording with the simulator's true rig, export it, score it."""
-    result = reconstruct_file(journal, rig)
-    write_trial(c3d, result.trial)
-    ticks = result.ticks if result.ticks is not None else np.zeros(0, np.int64)
-    true = read_truth_positions(truth).at_ticks(ticks)
-    error = np.linalg.norm(result.trial.points - true, axis=-1)
-    error = error[np.isfinite(error)]
-    return {
-        "c3d": str(c3d),
-        "markers_reconstructed": result.summary["markers_reconstructed"],
-        "rms_ray_px": result.summary["rms_ray_px"],
-        "error_rms_mm": float(np.sqrt(np.mean(error**2))) if error.size else None,
-        "error_max_mm": float(error.max()) if error.size else None,
-    }
 
 
 def run(args: argparse.Namespace) -> int:
@@ -132,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     # Every frame damaged on the link is lost to the host; the device's own FIFO drops
     # are told apart by the frame number.
     link_lost = stream["lost_frames"] - stream["device_dropped"]
-    reconstruction = _reconstruct(journal, rig, truth, c3d)
+    reconstruction = score_reconstruction(journal, rig, truth, c3d)
     error_rms = reconstruction["error_rms_mm"]
     report: dict[str, Any] = {
         "system": f"{CAMERAS} cameras x {LEDS} LEDs at {RATE_HZ:g} Hz (simulated, real pty)",

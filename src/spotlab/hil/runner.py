@@ -1,0 +1,206 @@
+"""Run a scenario: simulators as processes, ``spotlab record``, processing, scoring, report.
+
+1. every simulator starts as its own ``spotlab sim`` process on a real pty or TCP
+   port (:mod:`spotlab.hil.processes`);
+2. a lab file naming their addresses, settings and the timer's wiring is written and
+   recorded by ``spotlab record --lab`` in its own process, as in a lab;
+3. the simulators are stopped (they write their truth and fault logs);
+4. the processing steps run through :mod:`spotlab.processing` (session times,
+   reconstruction with the simulator's true rig, C3D export), then the figures are
+   scored against the truth (:mod:`spotlab.hil.scoring`) and the criteria checked;
+5. ``summary.json``, ``junit.xml`` (or ``--junit``) and ``report.html`` are written.
+
+Ctrl-C (KeyboardInterrupt) at any point stops the recorder (SIGINT: it closes the
+journal) and every simulator, and still writes the report of what was done, marked
+interrupted; the interrupt is then raised again.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from spotlab.hil.labelling import score_labelling
+from spotlab.hil.processes import (
+    CLI,
+    RunningSim,
+    check_ports,
+    start_simulators,
+    stop_simulators,
+)
+from spotlab.hil.report import write_html, write_junit, write_summary
+from spotlab.hil.scenario import Scenario
+from spotlab.hil.scoring import device_figures, frame_latency, score_reconstruction, sync_error
+
+
+def _toml_value(value: Any) -> str:
+    return json.dumps(value) if isinstance(value, str) else str(value).lower() if isinstance(
+        value, bool) else str(value)  # fmt: skip
+
+
+def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
+    """The lab file of the running simulators (docs/lab.md)."""
+    lines = []
+    if scenario.rig is not None:
+        lines.append(f"rig = {json.dumps(str(scenario.rig))}")
+    model = scenario.model
+    if model is None and "labelling" in scenario.steps:  # the hub simulator's own model
+        model = sims[0].truth.parent / f"{sims[0].device.name}.model.json"
+    if model is not None:
+        lines.append(f"model = {json.dumps(str(model))}")
+    for sim in sims:
+        d = sim.device
+        lines += ["", "[[device]]", f"family = {json.dumps(d.family)}",
+                  f"port = {json.dumps(sim.address)}", f"name = {json.dumps(d.name)}"]  # fmt: skip
+        lines += [f"{k} = {_toml_value(v)}" for k, v in d.settings.items()]
+    if scenario.wiring:
+        lines += ["", "[wiring]"] + [f"{k} = {v}" for k, v in scenario.wiring.items()]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str, Any]:
+    """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process."""
+    out, err = folder / "record.stdout", folder / "record.stderr"
+    argv = [
+        *CLI,
+        "record",
+        "--lab",
+        str(lab),
+        "--seconds",
+        f"{seconds:g}",
+        "--out",
+        str(journal),
+        "--json",
+        "--overwrite",
+    ]  # fmt: skip  (the run's own folder)
+    with open(out, "wb") as fo, open(err, "wb") as fe:
+        proc = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
+    try:
+        code = proc.wait(timeout=seconds + 120)
+    except BaseException:  # Ctrl-C or the time-out: the recorder closes its journal on SIGINT
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        raise
+    errors = [ln for ln in err.read_text(errors="replace").splitlines()
+              if ln.startswith("spotlab: error:")]  # fmt: skip
+    return {"record_exit_code": code, "record_error": errors[0] if errors else None}
+
+
+def _process(
+    scenario: Scenario, sims: list[RunningSim], journal: Path, folder: Path
+) -> dict[str, Any]:
+    run: dict[str, Any] = {}
+    if "timestamps" in scenario.steps:
+        truths = {s.device.name: (s.device.family, s.truth) for s in sims
+                  if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
+        found = sync_error(journal, truths, scenario.wiring, folder / "timestamps.csv")
+        run["sync_error_us"] = found["sync_error_us"]
+        run["sync_error_timed_us"] = found["sync_error_timed_us"]
+        run["sync_error_per_stream_us"] = found["per_stream_us"]
+        run["timebase_notes"] = found["notes"]
+    if "reconstruction" in scenario.steps:
+        (sim,) = sims
+        assert sim.rig is not None
+        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
+        found = score_reconstruction(journal, sim.rig, sim.truth, c3d)
+        run["error_3d_rms_mm"] = found["error_rms_mm"]
+        run["error_3d_max_mm"] = found["error_max_mm"]
+        run["markers_reconstructed"] = found["markers_reconstructed"]
+        if c3d is not None:
+            run["c3d"] = str(c3d)
+    if "labelling" in scenario.steps:
+        (sim,) = sims
+        assert sim.rig is not None
+        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
+        run.update(score_labelling(journal, sim.rig, sim.truth, c3d))
+        if c3d is not None:
+            run["c3d"] = str(c3d)
+    return run
+
+
+def _criteria(
+    scenario: Scenario, devices: dict[str, dict[str, Any]], run: dict[str, Any]
+) -> list[dict[str, Any]]:
+    out = []
+    for c in scenario.criteria:
+        stream, dot, figure = c.figure.partition(".")
+        value = devices.get(stream, {}).get(figure) if dot else run.get(c.figure)
+        out.append({"criterion": c.describe(), "figure": c.figure, "value": value,
+                    "passed": c.holds(value)})  # fmt: skip
+    return out
+
+
+def run_scenario(
+    scenario: Scenario,
+    folder: Path,
+    *,
+    seed: int | None = None,
+    junit: Path | None = None,
+    progress: Callable[[str], None] = lambda _: None,
+) -> dict[str, Any]:
+    """Run ``scenario`` with its outputs in ``folder``; returns the summary (``verdict``).
+
+    Raises
+    ------
+    ScenarioError
+        A fixed port is busy (nothing is written then), or a simulator does not start.
+    """
+    check_ports(scenario)
+    folder.mkdir(parents=True, exist_ok=True)
+    seed = scenario.seed if seed is None else seed
+    started = time.monotonic()
+    summary: dict[str, Any] = {
+        "scenario": scenario.name, "file": str(scenario.path), "description": scenario.description,
+        "seed": seed, "duration_s": scenario.duration_s, "steps": list(scenario.steps),
+        "devices": {}, "run": {}, "criteria": [], "problem": None,
+    }  # fmt: skip
+    journal = folder / "run.spj"
+    sims: list[RunningSim] = []
+    try:
+        progress(f"starting {len(scenario.devices)} simulator(s)")
+        sims = start_simulators(scenario, seed, folder)
+        summary["run"]["simulator_pids"] = {s.device.name: s.proc.pid for s in sims}
+        lab = write_lab(scenario, sims, folder / "lab.toml")
+        progress(f"recording {scenario.duration_s:g} s")
+        summary["run"].update(_record(lab, journal, scenario.duration_s, folder))
+        codes = stop_simulators(sims)
+        summary["run"]["simulator_exit_codes"] = codes
+        if not journal.is_file():  # a journal ended by an error is scored (record_exit_code)
+            summary["problem"] = summary["run"]["record_error"] or "the recording failed"
+        else:
+            progress("processing and scoring against the truth")
+            logs = {s.device.name: s.fault_log for s in sims}
+            summary["devices"] = device_figures(journal, logs)
+            truths = {s.device.name: (s.device.family, s.truth) for s in sims
+                      if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
+            for name, figures in frame_latency(journal, truths).items():
+                summary["devices"].setdefault(name, {}).update(figures)
+            summary["run"].update(_process(scenario, sims, journal, folder))
+    except KeyboardInterrupt:
+        summary["problem"] = "interrupted (Ctrl-C): partial report"
+        raise
+    finally:
+        if sims:
+            stop_simulators(sims)
+        summary["criteria"] = _criteria(scenario, summary["devices"], summary["run"])
+        summary["seconds"] = round(time.monotonic() - started, 2)
+        ok = summary["problem"] is None and all(c["passed"] for c in summary["criteria"])
+        summary["verdict"] = "pass" if ok else "fail"
+        write_summary(summary, folder / "summary.json")
+        write_junit(summary, junit or folder / "junit.xml")
+        write_html(summary, folder / "report.html")
+    return summary
+
+
+__all__ = ["run_scenario", "write_lab"]
