@@ -101,6 +101,18 @@ def _spotlab_error() -> type[Exception]:
     return SpotlabError
 
 
+def _interrupted(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is in the chain of causes of ``exc``."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -113,6 +125,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit:  # --help, --version and usage errors: argparse has spoken
         raise
     except KeyboardInterrupt:
+        report("interrupted")
+        return EXIT_INTERRUPTED
+    except ImportError as exc:
+        # Ctrl-C while a C extension was being imported: numpy re-raises the
+        # KeyboardInterrupt as an ImportError ("Importing the numpy C-extensions
+        # failed"), the interrupt kept as its context.
+        if not _interrupted(exc):
+            raise
         report("interrupted")
         return EXIT_INTERRUPTED
     except CommandError as exc:
