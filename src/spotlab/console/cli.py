@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from spotlab import __version__
@@ -101,8 +103,22 @@ def _spotlab_error() -> type[Exception]:
     return SpotlabError
 
 
+_sigint_seen = threading.Event()
+
+
+def _on_sigint(signum: int, frame: object) -> None:
+    """Python's own Ctrl-C handling, remembering that it happened."""
+    _sigint_seen.set()
+    raise KeyboardInterrupt
+
+
 def _interrupted(exc: BaseException) -> bool:
-    """Whether a KeyboardInterrupt is in the chain of causes of ``exc``."""
+    """Whether ``exc`` comes from a Ctrl-C: a KeyboardInterrupt in its chain of causes, or
+    one taken while it was being raised (an extension module being imported turns the
+    interrupt into an ImportError of its own, e.g. numpy's "PyCapsule_Import could not
+    import module 'datetime'")."""
+    if _sigint_seen.is_set():
+        return True
     seen: set[int] = set()
     current: BaseException | None = exc
     while current is not None and id(current) not in seen:
@@ -116,6 +132,22 @@ def _interrupted(exc: BaseException) -> bool:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    own_handler = (
+        threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    )
+    if own_handler:
+        _sigint_seen.clear()
+        signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        return _main(argv)
+    finally:
+        if own_handler and signal.getsignal(signal.SIGINT) is _on_sigint:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _main(argv: list[str]) -> int:
+    """:func:`main` with its Ctrl-C handler in place."""
     try:
         parser = build_parser(_command_of(argv))
         args, extra = parser.parse_known_args(argv)
@@ -129,8 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     except ImportError as exc:
         # Ctrl-C while a C extension was being imported: numpy re-raises the
-        # KeyboardInterrupt as an ImportError ("Importing the numpy C-extensions
-        # failed"), the interrupt kept as its context.
+        # interrupt as an ImportError of its own.
         if not _interrupted(exc):
             raise
         report("interrupted")
