@@ -29,6 +29,7 @@ from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
 from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
+from spotlab.reconstruction.identification.handedness import misplaced_segments
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
 from spotlab.reconstruction.identification.tracking import Tracks, associate
@@ -321,7 +322,24 @@ class Identifier:
                 tracks.label[new] = taken
                 tracks.age[new] = 0
                 tracks.label[stale] = -1
+        if self.model.references:
+            self._check_handedness()
         self._update_anchors()
+
+    def _check_handedness(self) -> None:
+        """Drop the labels of flat clusters whose references say they are the wrong way
+        round (a wrong identity passes every distance check): found again next frame."""
+        tracks = self.tracks
+        lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
+        points = np.full((len(self.model.labels), 3), np.nan)
+        points[tracks.label[lab]] = tracks.position[lab]
+        drop = misplaced_segments(
+            self.model.segment_arrays, self.model.references_by_segment, points
+        )
+        if drop.any():
+            bad = np.isin(tracks.label, np.flatnonzero(drop)) & (tracks.missed == 0)
+            tracks.label[bad] = -1
+            tracks.age[bad] = 0
 
     def _update_anchors(self) -> None:
         tracks = self.tracks
