@@ -441,9 +441,15 @@ def _segment_choice(
         return None
     table = table[(table >= 0).sum(axis=1) == (table >= 0).sum(axis=1).max()]
     if refs and ref_rows is not None:
-        table = table[~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)]
-        if table.shape[0] == 0:
-            return None
+        if (ref_rows >= 0).any():
+            table = table[~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)]
+            if table.shape[0] == 0:
+                return None
+        else:
+            # A flat cluster none of whose references is labelled yet: its mirror image
+            # fits it almost as well, so only a clear lead is taken (a wrong identity
+            # taken now would be reported until the references show it).
+            margin_mm = max(margin_mm, tol_mm)
     choice = choose_identity(seg.coordinates, points, candidates=table.tolist())
     # Woltring's caveat: the smallest RMS is a criterion, not a proof; ambiguous ones wait.
     if choice.margin < margin_mm:

@@ -97,6 +97,23 @@ def test_the_reference_settles_an_identity_distances_leave_open() -> None:
     assert assign_labels(model, points, labels, **kw).tolist() == [2, 0, 3, 1]
 
 
+def test_a_flat_cluster_waits_for_its_references_unless_its_lead_is_clear() -> None:
+    # AC 3 mm longer than AB: exchanging B and C fits 1.9 mm worse (RMS), a lead above
+    # the 1 mm margin, below the 5 mm tolerance
+    tri = np.array([[0.0, 0.0, 0.0], [80.0, 40.0, 0.0], [80.0, -46.0, 0.0]])
+    coords = tri - tri.mean(axis=0)
+    seg = Segment("tri", (0, 1, 2), coords)
+    links = tuple(Link(m, 3, 0.0, 500.0) for m in range(3))
+    ref = Reference(0, 3, np.array([0.0, 0.0, 1.0]), 10.0)
+    checked = MarkerModel(("A", "B", "C", "D"), (seg,), links, 5.0, 50.0, references=(ref,))
+    plain = MarkerModel(("A", "B", "C", "D"), (seg,), links, 5.0, 50.0)
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
+    points = tri + 1000.0
+    free = np.full(3, -1)
+    assert assign_labels(plain, points, free, **kw).tolist() == [0, 1, 2]
+    assert assign_labels(checked, points, free, **kw).tolist() == [-1, -1, -1]
+
+
 def test_references_survive_json(tmp_path: Path) -> None:
     model = triangle_model(motion())
     model.save(tmp_path / "m.json")
