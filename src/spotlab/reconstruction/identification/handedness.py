@@ -29,6 +29,7 @@ __all__ = [
     "Reference",
     "learn_references",
     "misplaced_segments",
+    "side_table",
     "wrong_way_round",
 ]
 
@@ -48,6 +49,13 @@ PER_SEGMENT = 4
 #: A reference must stand at least this far from its cluster's centre (mm): nearer, the
 #: skin motion of the cluster turns its direction.
 MIN_DISTANCE_MM = 30.0
+#: A side is learnt for a reference that stood this far off the cluster's plane (mm);
+#: checked, a reference within ``SIDE_NOISE_MM`` of the plane says nothing.
+MIN_SIDE_MM = 15.0
+SIDE_NOISE_MM = 5.0
+
+_NEXT = np.array([1, 2, 0])
+_LAST = np.array([2, 0, 1])
 
 
 @dataclass(frozen=True)
@@ -65,12 +73,21 @@ class Reference:
     spread_deg : float
         Half-angle of the cone (degrees): the learnt directions' largest angle to the
         axis (of the ``CONE_SHARE`` nearest).
+    triple : tuple of int
+        Three markers of the cluster spanning its largest triangle (model indices), or
+        () for none.
+    side : int
+        +1 or -1: the side of the triangle ``triple`` (its normal ``(b - a) x (c - a)``)
+        the marker stood on, at least ``MIN_SIDE_MM`` off its plane, in the
+        ``CONE_SHARE`` of the learnt frames; 0 when it did not keep to one side.
     """
 
     segment: int
     marker: int
     direction: FloatArray
     spread_deg: float
+    triple: tuple[int, ...] = ()
+    side: int = 0
 
 
 def is_flat(coordinates: FloatArray, tolerance_mm: float) -> bool:
@@ -112,6 +129,8 @@ def learn_references(
         complete = np.isfinite(Y).all(axis=(1, 2))
         if complete.sum() < 3:
             continue
+        triple = _largest_triangle(coords)
+        heights = _heights(positions[complete][:, markers[triple]], positions[complete])
         pose = rigid_pose(coords, Y[complete])
         R, t = pose.R[pose.valid], pose.t[pose.valid]
         X = positions[complete][pose.valid]
@@ -131,10 +150,39 @@ def learn_references(
             angle = np.degrees(np.arccos(np.clip(u @ axis, -1.0, 1.0)))
             spread = float(np.quantile(angle, CONE_SHARE))
             if spread <= MAX_SPREAD_DEG:
-                found.append(Reference(s, int(m), axis, spread))
+                h = heights[:, m][np.isfinite(heights[:, m])]
+                side = 0
+                for sign in (1, -1):
+                    if h.size and np.quantile(sign * h, 1.0 - CONE_SHARE) > MIN_SIDE_MM:
+                        side = sign
+                tri = tuple(int(markers[k]) for k in triple)
+                found.append(Reference(s, int(m), axis, spread, tri, side))
         found.sort(key=lambda r: r.spread_deg)
         out.extend(found[:PER_SEGMENT])
     return tuple(out)
+
+
+def _largest_triangle(coords: FloatArray) -> list[int]:
+    """Indices of the three points (P, 3) spanning the largest triangle."""
+    P = coords.shape[0]
+    best, area = [0, 1, 2], -1.0
+    for i in range(P):
+        for j in range(i + 1, P):
+            for k in range(j + 1, P):
+                a = float(np.linalg.norm(np.cross(coords[j] - coords[i], coords[k] - coords[i])))
+                if a > area:
+                    best, area = [i, j, k], a
+    return best
+
+
+def _heights(tri: FloatArray, X: FloatArray) -> FloatArray:
+    """Signed distances (F, M) mm of points ``X`` (F, M, 3) from the planes of the
+    triangles ``tri`` (F, 3, 3), along ``(b - a) x (c - a)``; NaN where unknown."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    n = np.cross(b - a, c - a)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    return np.asarray(np.einsum("fi,fmi->fm", n, X - a[:, None, :]))
 
 
 def _verdicts(
@@ -194,9 +242,21 @@ def wrong_way_round(
     return np.asarray((outside > 0) & (outside >= inside))
 
 
+def side_table(refs: tuple[Reference, ...]) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+    """The references with a side, as arrays ``(segment, triple (n, 3), marker, side)``
+    (built once per model: :func:`misplaced_segments` uses them every frame)."""
+    keep = [r for r in refs if r.side != 0 and len(r.triple) == 3]
+    return (
+        np.array([r.segment for r in keep], dtype=np.intp),
+        np.array([r.triple for r in keep], dtype=np.intp).reshape(-1, 3),
+        np.array([r.marker for r in keep], dtype=np.intp),
+        np.array([r.side for r in keep], dtype=np.intp),
+    )
+
+
 def misplaced_segments(
     segments: tuple[tuple[IntArray, FloatArray], ...],
-    by_segment: dict[int, list[Reference]],
+    table: tuple[IntArray, IntArray, IntArray, IntArray],
     points: FloatArray,
 ) -> NDArray[np.bool_]:
     """Labels of clusters turned the wrong way round in one frame.
@@ -205,28 +265,35 @@ def misplaced_segments(
     ----------
     segments : tuple of (markers, coordinates)
         Each cluster's marker indices and layout (mm).
-    by_segment : dict of int to list of Reference
-        References per cluster index.
+    table : tuple of arrays
+        :func:`side_table` of the model's references.
     points : ndarray, shape (M, 3)
         Labelled points of the frame in model order (mm), NaN where missing.
 
     Returns
     -------
     ndarray of bool, shape (M,)
-        True for every marker of a cluster (with three or more labelled) whose labelled
-        references mostly fall outside their cones: its identity is dropped and found
-        again, with the references, from the cluster's shape.
+        True for every marker of a cluster on whose triangle (labelled) more labelled
+        references stand on the wrong side than on their own (more than
+        ``SIDE_NOISE_MM`` off its plane): a mirror image (two alike markers exchanged)
+        turns the triangle over. Its identity is dropped and found again, with the
+        references, from the cluster's shape. A few array operations for all clusters:
+        cheap enough for every frame.
     """
     drop = np.zeros(points.shape[0], dtype=bool)
-    for s, refs in by_segment.items():
-        markers, coords = segments[s]
-        observed = points[markers]
-        if np.isfinite(observed[:, 0]).sum() < 3:
-            continue
-        ref_points = points[[r.marker for r in refs]]
-        if not np.isfinite(ref_points[:, 0]).any():
-            continue
-        outside, inside = _verdicts(coords, observed[None], refs, ref_points)
-        if outside[0] > inside[0]:
-            drop[markers] = True
+    segment, triple, marker, side = table
+    if segment.size == 0:
+        return drop
+    a, b, c = points[triple[:, 0]], points[triple[:, 1]], points[triple[:, 2]]
+    u, v, w = b - a, c - a, points[marker] - a
+    n = u[:, _NEXT] * v[:, _LAST] - u[:, _LAST] * v[:, _NEXT]  # (b - a) x (c - a)
+    along = (n * w).sum(axis=1) * side  # height times |n|
+    noise = SIDE_NOISE_MM * np.sqrt((n * n).sum(axis=1))
+    with np.errstate(invalid="ignore"):
+        wrong = along < -noise
+        right = along > noise
+    S = len(segments)
+    bad = np.bincount(segment[wrong], minlength=S) > np.bincount(segment[right], minlength=S)
+    for s in np.flatnonzero(bad):
+        drop[segments[s][0]] = True
     return drop

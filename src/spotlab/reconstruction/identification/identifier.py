@@ -322,7 +322,7 @@ class Identifier:
                 tracks.label[new] = taken
                 tracks.age[new] = 0
                 tracks.label[stale] = -1
-        if self.model.references:
+        if self.model.sides[0].size:
             self._check_handedness()
         self._update_anchors()
 
@@ -333,9 +333,7 @@ class Identifier:
         lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
         points = np.full((len(self.model.labels), 3), np.nan)
         points[tracks.label[lab]] = tracks.position[lab]
-        drop = misplaced_segments(
-            self.model.segment_arrays, self.model.references_by_segment, points
-        )
+        drop = misplaced_segments(self.model.segment_arrays, self.model.sides, points)
         if drop.any():
             bad = np.isin(tracks.label, np.flatnonzero(drop)) & (tracks.missed == 0)
             tracks.label[bad] = -1

@@ -26,7 +26,11 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial.distance import squareform
 
 from spotlab.core.errors import ReconstructionError
-from spotlab.reconstruction.identification.handedness import Reference, learn_references
+from spotlab.reconstruction.identification.handedness import (
+    Reference,
+    learn_references,
+    side_table,
+)
 from spotlab.reconstruction.identification.spreads import (
     check_motion,
     least_varying,
@@ -143,6 +147,10 @@ class MarkerModel:
                 raise ReconstructionError(f"reference {ref} names an unknown segment or marker")
             if owner[ref.marker] == ref.segment:
                 raise ReconstructionError(f"reference {ref} is a marker of its own segment")
+            if ref.triple and (
+                len(ref.triple) != 3 or any(owner[m] != ref.segment for m in ref.triple)
+            ):
+                raise ReconstructionError(f"reference {ref}: triple not of its segment")
         lost = np.flatnonzero((owner < 0) & (n_links < MIN_LINKS))
         if lost.size:
             raise ReconstructionError(
@@ -170,6 +178,11 @@ class MarkerModel:
         for ref in self.references:
             out.setdefault(ref.segment, []).append(ref)
         return out
+
+    @cached_property
+    def sides(self) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+        """:func:`.handedness.side_table` of :attr:`references` (built once)."""
+        return side_table(self.references)
 
     @cached_property
     def intervals(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
@@ -436,6 +449,8 @@ class MarkerModel:
                     "marker": self.labels[r.marker],
                     "direction": r.direction.round(6).tolist(),
                     "spread_deg": round(r.spread_deg, 4),
+                    "triple": [self.labels[m] for m in r.triple],
+                    "side": r.side,
                 }
                 for r in self.references
             ]
@@ -474,6 +489,8 @@ class MarkerModel:
                     index[str(r["marker"])],
                     np.asarray(r["direction"], dtype=np.float64).reshape(3),
                     float(r["spread_deg"]),
+                    tuple(index[str(x)] for x in r.get("triple", [])),
+                    int(r.get("side", 0)),
                 )
                 for r in data.get("references", [])
             )

@@ -55,6 +55,8 @@ def test_the_reference_of_a_flat_cluster_is_learnt() -> None:
     expected = (D_LOCAL - TRIANGLE.mean(axis=0)) / np.linalg.norm(D_LOCAL - TRIANGLE.mean(axis=0))
     assert float(ref.direction @ expected) > np.cos(np.radians(3.0))
     assert 0.5 < ref.spread_deg < 10.0
+    # and its side of the triangle: (B - A) x (C - A) points to -z, D stands at +z
+    assert ref.triple == (0, 1, 2) and ref.side == -1
 
 
 def test_a_solid_cluster_needs_no_reference() -> None:
@@ -79,9 +81,9 @@ def test_a_mirrored_identity_is_refused_and_dropped() -> None:
     assert not none.any()
     # in a labelled frame: the exchanged cluster loses its labels, D keeps its own
     swapped = frame[[0, 2, 1, 3]]
-    drop = misplaced_segments(model.segment_arrays, model.references_by_segment, swapped)
+    drop = misplaced_segments(model.segment_arrays, model.sides, swapped)
     assert drop.tolist() == [True, True, True, False]
-    ok = misplaced_segments(model.segment_arrays, model.references_by_segment, frame)
+    ok = misplaced_segments(model.segment_arrays, model.sides, frame)
     assert not ok.any()
 
 
