@@ -242,21 +242,21 @@ def wrong_way_round(
     return np.asarray((outside > 0) & (outside >= inside))
 
 
-def side_table(refs: tuple[Reference, ...]) -> tuple[IntArray, IntArray, IntArray, IntArray]:
-    """The references with a side, as arrays ``(segment, triple (n, 3), marker, side)``
-    (built once per model: :func:`misplaced_segments` uses them every frame)."""
+def side_table(refs: tuple[Reference, ...]) -> tuple[IntArray, IntArray, FloatArray]:
+    """The references with a side, as arrays ``(segment (n,), markers (4, n), side (n,))``,
+    ``markers`` the triangle's three then the reference (built once per model:
+    :func:`misplaced_segments` uses them every frame)."""
     keep = [r for r in refs if r.side != 0 and len(r.triple) == 3]
     return (
         np.array([r.segment for r in keep], dtype=np.intp),
-        np.array([r.triple for r in keep], dtype=np.intp).reshape(-1, 3),
-        np.array([r.marker for r in keep], dtype=np.intp),
-        np.array([r.side for r in keep], dtype=np.intp),
+        np.array([[*r.triple, r.marker] for r in keep], dtype=np.intp).reshape(-1, 4).T.copy(),
+        np.array([r.side for r in keep], dtype=np.float64),
     )
 
 
 def misplaced_segments(
     segments: tuple[tuple[IntArray, FloatArray], ...],
-    table: tuple[IntArray, IntArray, IntArray, IntArray],
+    table: tuple[IntArray, IntArray, FloatArray],
     points: FloatArray,
 ) -> NDArray[np.bool_]:
     """Labels of clusters turned the wrong way round in one frame.
@@ -281,17 +281,22 @@ def misplaced_segments(
         cheap enough for every frame.
     """
     drop = np.zeros(points.shape[0], dtype=bool)
-    segment, triple, marker, side = table
+    segment, markers, side = table
     if segment.size == 0:
         return drop
-    a, b, c = points[triple[:, 0]], points[triple[:, 1]], points[triple[:, 2]]
-    u, v, w = b - a, c - a, points[marker] - a
-    n = u[:, _NEXT] * v[:, _LAST] - u[:, _LAST] * v[:, _NEXT]  # (b - a) x (c - a)
-    along = (n * w).sum(axis=1) * side  # height times |n|
-    noise = SIDE_NOISE_MM * np.sqrt((n * n).sum(axis=1))
+    q = points[markers]  # (4, n, 3): a, b, c, the reference
+    d = q[1:] - q[0]  # b - a, c - a, reference - a
+    u, v = d[0], d[1]
+    n = u[:, _NEXT] * v[:, _LAST]
+    n -= u[:, _LAST] * v[:, _NEXT]  # (b - a) x (c - a)
+    along = np.einsum("ij,ij->i", n, d[2]) * side  # height on its side, times |n|
+    nn = np.einsum("ij,ij->i", n, n)
     with np.errstate(invalid="ignore"):
-        wrong = along < -noise
-        right = along > noise
+        far = along * along > SIDE_NOISE_MM**2 * nn
+        wrong = far & (along < 0.0)
+    if not wrong.any():
+        return drop
+    right = far & ~wrong
     S = len(segments)
     bad = np.bincount(segment[wrong], minlength=S) > np.bincount(segment[right], minlength=S)
     for s in np.flatnonzero(bad):

@@ -148,6 +148,7 @@ class Identifier:
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
         _ = model.partners, model.directed  # the model's lookup tables, built before frames
+        self._points = np.full((len(model.labels), 3), np.nan)  # handedness check buffer
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -330,8 +331,9 @@ class Identifier:
         """Drop the labels of flat clusters whose references say they are the wrong way
         round (a wrong identity passes every distance check): found again next frame."""
         tracks = self.tracks
-        lab = np.flatnonzero((tracks.label >= 0) & (tracks.missed == 0))
-        points = np.full((len(self.model.labels), 3), np.nan)
+        lab = (tracks.label >= 0) & (tracks.missed == 0)
+        points = self._points
+        points.fill(np.nan)
         points[tracks.label[lab]] = tracks.position[lab]
         drop = misplaced_segments(self.model.segment_arrays, self.model.sides, points)
         if drop.any():

@@ -180,7 +180,7 @@ class MarkerModel:
         return out
 
     @cached_property
-    def sides(self) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+    def sides(self) -> tuple[IntArray, IntArray, FloatArray]:
         """:func:`.handedness.side_table` of :attr:`references` (built once)."""
         return side_table(self.references)
 
