@@ -29,6 +29,7 @@ from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
 from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
+from spotlab.reconstruction.identification.handedness import misplaced_segments
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
 from spotlab.reconstruction.identification.tracking import Tracks, associate
@@ -147,6 +148,7 @@ class Identifier:
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
         _ = model.partners, model.directed  # the model's lookup tables, built before frames
+        self._points = np.full((len(model.labels), 3), np.nan)  # handedness check buffer
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -321,7 +323,23 @@ class Identifier:
                 tracks.label[new] = taken
                 tracks.age[new] = 0
                 tracks.label[stale] = -1
+        if self.model.sides[0].size:
+            self._check_handedness()
         self._update_anchors()
+
+    def _check_handedness(self) -> None:
+        """Drop the labels of flat clusters whose references say they are the wrong way
+        round (a wrong identity passes every distance check): found again next frame."""
+        tracks = self.tracks
+        lab = (tracks.label >= 0) & (tracks.missed == 0)
+        points = self._points
+        points.fill(np.nan)
+        points[tracks.label[lab]] = tracks.position[lab]
+        drop = misplaced_segments(self.model.segment_arrays, self.model.sides, points)
+        if drop.any():
+            bad = np.isin(tracks.label, np.flatnonzero(drop)) & (tracks.missed == 0)
+            tracks.label[bad] = -1
+            tracks.age[bad] = 0
 
     def _update_anchors(self) -> None:
         tracks = self.tracks

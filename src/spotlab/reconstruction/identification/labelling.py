@@ -27,6 +27,7 @@ from scipy.optimize import linear_sum_assignment
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction._rigid_identity import choose_identity
+from spotlab.reconstruction.identification.handedness import Reference, wrong_way_round
 from spotlab.reconstruction.identification.model import MarkerModel, Segment
 from spotlab.reconstruction.rigid import rigid_fit
 
@@ -402,7 +403,9 @@ def _segment_labels(
     free = np.flatnonzero(labels < 0)
     if anchors is not None and np.isfinite(anchors[s]).all():
         free = free[np.linalg.norm(points[free] - anchors[s], axis=1) < near_mm]
-    return _segment_choice(seg, points, fixed, free, tol_mm, margin_mm), free
+    refs = model.references_by_segment.get(s, [])
+    ref_rows = point_of[[r.marker for r in refs]] if refs else np.zeros(0, dtype=np.intp)
+    return _segment_choice(seg, points, fixed, free, tol_mm, margin_mm, refs, ref_rows), free
 
 
 def _segment_choice(
@@ -412,9 +415,12 @@ def _segment_choice(
     free: IntArray,
     tol_mm: float,
     margin_mm: float,
+    refs: list[Reference] | None = None,
+    ref_rows: IntArray | None = None,
 ) -> tuple[float, IntArray] | None:
     """:func:`_segment_labels` among the points ``free``, with ``fixed`` (point per marker
-    or -1)."""
+    or -1); candidate identities the segment's references ``refs`` (their points
+    ``ref_rows``, -1 where unlabelled) refuse are left out (:func:`.wrong_way_round`)."""
     if free.size == 0:
         return None
     predicted = _predicted(seg, points, fixed)
@@ -434,6 +440,16 @@ def _segment_choice(
     if table.shape[0] == 0:
         return None
     table = table[(table >= 0).sum(axis=1) == (table >= 0).sum(axis=1).max()]
+    if refs and ref_rows is not None:
+        if (ref_rows >= 0).any():
+            table = table[~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)]
+            if table.shape[0] == 0:
+                return None
+        else:
+            # A flat cluster none of whose references is labelled yet: its mirror image
+            # fits it almost as well, so only a clear lead is taken (a wrong identity
+            # taken now would be reported until the references show it).
+            margin_mm = max(margin_mm, tol_mm)
     choice = choose_identity(seg.coordinates, points, candidates=table.tolist())
     # Woltring's caveat: the smallest RMS is a criterion, not a proof; ambiguous ones wait.
     if choice.margin < margin_mm:

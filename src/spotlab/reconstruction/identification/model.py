@@ -26,11 +26,16 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.spatial.distance import squareform
 
 from spotlab.core.errors import ReconstructionError
+from spotlab.reconstruction.identification.handedness import (
+    Reference,
+    learn_references,
+    side_table,
+)
 from spotlab.reconstruction.identification.spreads import (
     check_motion,
-    distance_range,
     least_varying,
     rigid_tolerance,
+    robust_range,
 )
 from spotlab.reconstruction.rigid import rigid_pose
 
@@ -103,6 +108,10 @@ class MarkerModel:
     link_spread_mm : float or None
         Largest distance spread (mm) of the pairs taken as links; None: links not
         learnt by spread.
+    references : tuple of Reference
+        Markers off a flat cluster seen in a fixed cone of directions from its frame
+        (:mod:`.handedness`): which way round the cluster sits, which its distances
+        cannot tell. Learnt by :meth:`infer`; none for a model given otherwise.
     """
 
     labels: tuple[str, ...]
@@ -110,6 +119,7 @@ class MarkerModel:
     links: tuple[Link, ...] = ()
     tolerance_mm: float | None = None
     link_spread_mm: float | None = None
+    references: tuple[Reference, ...] = ()
 
     def __post_init__(self) -> None:
         M = len(self.labels)
@@ -132,6 +142,15 @@ class MarkerModel:
             if not 0.0 <= link.min_mm <= link.max_mm:
                 raise ReconstructionError(f"link {link}: need 0 <= min_mm <= max_mm")
             n_links[[link.a, link.b]] += 1
+        for ref in self.references:
+            if not (0 <= ref.segment < len(self.segments) and 0 <= ref.marker < M):
+                raise ReconstructionError(f"reference {ref} names an unknown segment or marker")
+            if owner[ref.marker] == ref.segment:
+                raise ReconstructionError(f"reference {ref} is a marker of its own segment")
+            if ref.triple and (
+                len(ref.triple) != 3 or any(owner[m] != ref.segment for m in ref.triple)
+            ):
+                raise ReconstructionError(f"reference {ref}: triple not of its segment")
         lost = np.flatnonzero((owner < 0) & (n_links < MIN_LINKS))
         if lost.size:
             raise ReconstructionError(
@@ -146,6 +165,24 @@ class MarkerModel:
         for s, seg in enumerate(self.segments):
             out[list(seg.markers)] = s
         return out
+
+    @cached_property
+    def segment_arrays(self) -> tuple[tuple[IntArray, FloatArray], ...]:
+        """Each segment's ``(markers (P,), coordinates (P, 3))`` as arrays."""
+        return tuple((np.array(s.markers, dtype=np.intp), s.coordinates) for s in self.segments)
+
+    @cached_property
+    def references_by_segment(self) -> dict[int, list[Reference]]:
+        """:attr:`references` grouped by segment index (segments without none left out)."""
+        out: dict[int, list[Reference]] = {}
+        for ref in self.references:
+            out.setdefault(ref.segment, []).append(ref)
+        return out
+
+    @cached_property
+    def sides(self) -> tuple[IntArray, IntArray, FloatArray]:
+        """:func:`.handedness.side_table` of :attr:`references` (built once)."""
+        return side_table(self.references)
 
     @cached_property
     def intervals(self) -> tuple[IntArray, IntArray, FloatArray, FloatArray]:
@@ -264,7 +301,7 @@ class MarkerModel:
             out.append(Segment(str(name), tuple(m), coords - coords.mean(axis=0)))
         links: list[Link] = []
         if link_spread_mm is not None:
-            lo, hi = distance_range(X)
+            lo, hi = robust_range(X)
             owner = np.full(len(labels), -1)
             for s, seg in enumerate(out):
                 owner[list(seg.markers)] = s
@@ -334,7 +371,7 @@ class MarkerModel:
         """
         labels = tuple(str(x) for x in labels)
         X = _positions(positions, len(labels))
-        lo, hi = distance_range(X)
+        lo, hi = robust_range(X)
         spread = np.nan_to_num(hi - lo, nan=1e9)
         np.fill_diagonal(spread, 0.0)
         spread = np.maximum(spread, spread.T)
@@ -379,11 +416,13 @@ class MarkerModel:
             model,
             tolerance_mm=float(tolerance_mm),
             link_spread_mm=float(link_spread_mm) if link_spread_mm > 0 else None,
+            references=learn_references(model.segment_arrays, X, float(tolerance_mm)),
         )
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-safe description (the file layout of :meth:`save`)."""
-        return {
+        """JSON-safe description (the file layout of :meth:`save`); ``references`` only
+        when the model has some."""
+        out: dict[str, Any] = {
             "labels": list(self.labels),
             "tolerance_mm": self.tolerance_mm,
             "link_spread_mm": self.link_spread_mm,
@@ -403,6 +442,19 @@ class MarkerModel:
                 for k in self.links
             ],
         }
+        if self.references:
+            out["references"] = [
+                {
+                    "segment": self.segments[r.segment].name,
+                    "marker": self.labels[r.marker],
+                    "direction": r.direction.round(6).tolist(),
+                    "spread_deg": round(r.spread_deg, 4),
+                    "triple": [self.labels[m] for m in r.triple],
+                    "side": r.side,
+                }
+                for r in self.references
+            ]
+        return out
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the model as JSON."""
@@ -430,6 +482,18 @@ class MarkerModel:
                      float(k["range_mm"][0]), float(k["range_mm"][1]))
                 for k in data.get("links", [])
             )  # fmt: skip
+            seg_index = {seg.name: s for s, seg in enumerate(segments)}
+            references = tuple(
+                Reference(
+                    seg_index[str(r["segment"])],
+                    index[str(r["marker"])],
+                    np.asarray(r["direction"], dtype=np.float64).reshape(3),
+                    float(r["spread_deg"]),
+                    tuple(index[str(x)] for x in r.get("triple", [])),
+                    int(r.get("side", 0)),
+                )
+                for r in data.get("references", [])
+            )
             tolerance = data.get("tolerance_mm")
             link_spread = data.get("link_spread_mm")
             learnt = (
@@ -438,7 +502,7 @@ class MarkerModel:
             )
         except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
             raise ReconstructionError(f"{path}: not a marker model ({exc})") from None
-        return cls(labels, segments, links, *learnt)
+        return cls(labels, segments, links, *learnt, references=references)
 
 
 def _positions(positions: Any, M: int) -> FloatArray:

@@ -15,7 +15,13 @@ from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
 
-__all__ = ["check_motion", "distance_range", "least_varying", "rigid_tolerance"]
+__all__ = [
+    "check_motion",
+    "distance_range",
+    "least_varying",
+    "rigid_tolerance",
+    "robust_range",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -28,6 +34,13 @@ TOLERANCE_FLOOR_MM = 2.0
 #: ``MOVING_TOLERANCES`` rigid tolerances.
 MOVING_SHARE = 0.25
 MOVING_TOLERANCES = 4.0
+#: Robust ranges: quantiles of this share at each end, and the largest overshoot of the
+#: extremes beyond them kept (``ROBUST_PAD_MM`` plus this share of the inner range).
+ROBUST_SHARE = 0.05
+ROBUST_PAD_MM = 20.0
+ROBUST_PAD_SHARE = 1.0
+#: Frames (evenly spaced) the quantiles of :func:`robust_range` are taken from, at most.
+ROBUST_FRAMES = 4000
 
 
 def distance_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -40,6 +53,54 @@ def distance_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
         D = np.where(np.isfinite(D), D, np.nan)
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pairs
+            lo = np.fmin(lo, np.nanmin(D, axis=0))
+            hi = np.fmax(hi, np.nanmax(D, axis=0))
+    never = ~np.isfinite(lo) | ~np.isfinite(hi)
+    return np.where(never, np.nan, lo), np.where(never, np.nan, hi)
+
+
+def robust_range(X: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`distance_range` without the glitches of a file.
+
+    A labelled trajectory may jump for a few frames (a marker written as (0, 0, 0)
+    where it was missing, a reconstruction glitch: metres in one frame); the smallest
+    and largest distances then hold the glitch, not the body. Here a distance lying
+    beyond the ``ROBUST_SHARE`` (5 %) quantile at either end by more than
+    ``ROBUST_PAD_MM`` plus ``ROBUST_PAD_SHARE`` of the range between the two quantiles
+    is a glitch and left out; the range is the smallest and largest of the others. A
+    smooth trial keeps its ranges exactly, a jump of metres is left out.
+
+    Parameters
+    ----------
+    X : ndarray, shape (F, M, 3)
+        Trajectories (mm), NaN where missing.
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (M, M)
+        Smallest and largest distance of every pair, glitches left out; NaN for pairs
+        never seen together.
+    """
+    F, M = X.shape[:2]
+    sample = X[np.unique(np.linspace(0, F - 1, min(F, ROBUST_FRAMES)).round().astype(int))]
+    q_lo = np.full((M, M), np.nan)
+    q_hi = np.full((M, M), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pairs
+        for m in range(M):
+            D = np.linalg.norm(sample[:, m, None] - sample, axis=-1)  # (F', M)
+            q = np.nanquantile(D, [ROBUST_SHARE, 1.0 - ROBUST_SHARE], axis=0)
+            q_lo[m], q_hi[m] = q[0], q[1]
+    pad = ROBUST_PAD_MM + ROBUST_PAD_SHARE * (q_hi - q_lo)
+    low, high = q_lo - pad, q_hi + pad  # NaN for pairs never seen: nothing kept
+    lo = np.full((M, M), np.inf)
+    hi = np.full((M, M), -np.inf)
+    for start in range(0, F, 256):  # (256, M, M) at a time
+        D = np.linalg.norm(X[start : start + 256, :, None] - X[start : start + 256, None], axis=-1)
+        with np.errstate(invalid="ignore"):
+            D = np.where((D >= low) & (D <= high), D, np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
             lo = np.fmin(lo, np.nanmin(D, axis=0))
             hi = np.fmax(hi, np.nanmax(D, axis=0))
     never = ~np.isfinite(lo) | ~np.isfinite(hi)
