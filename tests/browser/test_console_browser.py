@@ -144,7 +144,29 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
     )  # fmt: skip
     sidecar = json.loads((data / "S01" / "session1" / "walk5s.json").read_text())
     assert sidecar["notes"] == "from the browser test" and 4.9 <= sidecar["duration_s"] <= 6.0
-    shutil.copy(ARTIFACTS / "4-exported.png", ARTIFACTS / "console.png")
+    # process it from the list: progress, then the quality numbers; export the result
+    row.locator("button.process").click()
+    page.wait_for_function(
+        "document.getElementById('process-stage').textContent.startsWith('done')", timeout=30_000
+    )
+    frames = page.inner_text("#process-quality tr[data-key='frames'] td")
+    assert int(frames) == trial.points.shape[0], frames
+    share = page.inner_text("#process-quality tr[data-key='reconstructed_fraction'] td")
+    assert float(share.rstrip(" %")) > 90, share
+    assert page.locator("#process-quality tr[data-key='rms_ray_px']").count() == 1
+    assert page.locator("#process-quality tr[data-key='gaps']").count() == 1
+    assert page.evaluate("document.getElementById('process-progress').value") == 1
+    page.click("#process-trc")
+    page.wait_for_function(
+        "document.getElementById('process-msg').textContent.includes('.trc')", timeout=30_000
+    )
+    assert (data / "S01" / "session1" / "walk5s.trc").is_file()
+    page.wait_for_function(
+        "document.querySelector(\"#trials tr[data-trial='S01.session1.walk5s']\")"
+        ".textContent.includes('RMS')", timeout=10_000,
+    )  # fmt: skip
+    _shot(page, "4b-processed")
+    shutil.copy(ARTIFACTS / "4b-processed.png", ARTIFACTS / "console.png")
     page.close()
 
 

@@ -185,6 +185,23 @@ def test_sim_console_api_records_and_exports(
     assert c.call("/api/trials/S01..t1/export", {"format": "c3d"})[0] == 400
     assert c.call("/api/trials/S01.walk.t9/export", {"format": "c3d"})[0] == 404
     assert c.call("/api/trials/stop", {})[0] == 409
+    # "Process": in a worker thread, progress and the quality numbers through the API
+    assert c.call("/api/trials/S01.walk.t1/process")[0] == 404  # not processed yet
+    assert c.call("/api/trials/S01.walk.t9/process", {})[0] == 404
+    code, job = c.call("/api/trials/S01.walk.t1/process", {})
+    assert code == 202 and job["trial"] == "S01.walk.t1" and job["state"] in ("running", "done")
+    job = c.until(
+        lambda: (j := c.call("/api/trials/S01.walk.t1/process")[1])["state"] != "running" and j
+    )
+    assert job["state"] == "done" and job["path"] == "triangulation", job
+    q = job["quality"]
+    assert q["frames"] > 100 and q["markers"] == 8 and 0.5 < q["reconstructed_fraction"] <= 1, q
+    assert 0 < q["rms_ray_px"] < 50 and {"gaps", "longest_gap_frames"} <= set(q), q
+    assert job["fraction"] == 1.0 and job["elapsed_s"] > 0
+    side = json.loads((data / "S01" / "walk" / "t1.json").read_text())
+    assert side["processing"]["quality"] == q and side["processing"]["path"] == "triangulation"
+    code, result = c.call("/api/trials/S01.walk.t1/export", {"format": "c3d"})
+    assert code == 200 and result["processed"] and result["frames"] == q["frames"], result
     # a second console on the same port: one error line, non-zero
     port = c.base.rsplit(":", 1)[1]
     second = subprocess.run(

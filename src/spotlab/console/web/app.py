@@ -25,6 +25,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from spotlab import __version__
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.export import export_trial
+from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo
 from spotlab.processing.errors import InputError
 
@@ -39,8 +40,16 @@ def _error(status: int, message: str) -> JSONResponse:
     return JSONResponse({"error": message}, status_code=status)
 
 
-def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
-    """The Starlette app of a running :class:`Acquisition`."""
+def make_app(
+    acq: Acquisition, token: str | None = None, processor: Processor | None = None
+) -> Starlette:
+    """The Starlette app of a running :class:`Acquisition`.
+
+    ``processor`` processes trials for ``/api/trials/{id}/process`` (default: one of the
+    acquisition's data folder and lab).
+    """
+    lab = acq.plan.lab
+    jobs = processor or Processor(acq.store, lab.rig, lab.model, lab.path)
 
     def allowed(given: str | None) -> bool:
         return token is None or (given is not None and hmac.compare_digest(given, token))
@@ -122,16 +131,39 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
             info = acq.store.load(request.path_params["tid"])
         except InputError as exc:
             return _error(404 if str(exc).startswith("no trial") else 400, str(exc))
-        lab = acq.plan.lab
         try:
             result = await asyncio.to_thread(
-                export_trial, acq.store, info, raw.get("format", "c3d"), lab.rig, lab.path
+                export_trial,
+                acq.store,
+                info,
+                raw.get("format", "c3d"),
+                jobs.rig,
+                lab.path,
+                jobs.result(info.id),
             )
         except InputError as exc:
             return _error(409 if "being recorded" in str(exc) else 400, str(exc))
         except Exception as exc:  # a numerics error, told to the page
             return _error(422, f"export failed: {exc}")
         return JSONResponse(result)
+
+    async def process(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        try:
+            info = acq.store.load(request.path_params["tid"])
+        except InputError as exc:
+            return _error(404 if str(exc).startswith("no trial") else 400, str(exc))
+        if request.method == "GET":
+            job = jobs.job(info.id)
+            if job is None:
+                return _error(404, f"trial {info.id} was not processed by this console")
+            return JSONResponse(job)
+        try:
+            jobs.submit(info)
+        except InputError as exc:
+            return _error(409 if "being" in str(exc) else 400, str(exc))
+        return JSONResponse(jobs.job(info.id), status_code=202)
 
     async def live(ws: WebSocket) -> None:
         if not allowed(token_of(ws)):
@@ -168,6 +200,7 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
         Route("/api/trials/start", start, methods=["POST"]),
         Route("/api/trials/stop", stop, methods=["POST"]),
         Route("/api/trials/{tid}/export", export, methods=["POST"]),
+        Route("/api/trials/{tid}/process", process, methods=["GET", "POST"]),
         WebSocketRoute("/api/live", live),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]

@@ -206,7 +206,7 @@ function refreshTrials() {
       const lost = Object.entries(t.lost).map(([k, v]) => k + " " + v).join(", ");
       for (const text of [t.id, t.started_at.replace("T", " ").slice(0, 19), fmt(t.duration_s, 2),
                           String(sum(t.frames)), lost, t.state + (t.exports.length ? " · " + t.exports.join(", ") : ""),
-                          [t.notes, ...t.messages].filter(Boolean).join(" · ")]) {
+                          [t.notes, ...t.messages].filter(Boolean).join(" · "), processedText(t.processing)]) {
         tr.appendChild(el("td", {}, text));
       }
       const td = el("td");
@@ -214,10 +214,99 @@ function refreshTrials() {
       b.disabled = t.state === "recording" || t.state === "failed";
       b.addEventListener("click", () => exportTrial(t.id, b));
       td.appendChild(b);
+      const pb = el("button", { class: "process", type: "button" }, "Process");
+      pb.disabled = b.disabled;
+      pb.addEventListener("click", () => processTrial(t.id));
+      td.appendChild(pb);
       tr.appendChild(td);
       body.appendChild(tr);
     }
   }).catch((e) => say("trials-msg", e.message, true));
+}
+
+// ---- processing: "Process" reconstructs a recorded trial in the console's worker thread,
+// follows its progress, shows the quality numbers and exports the result ------------
+const QUALITY = [
+  ["frames", "frames", 0], ["markers", "markers", 0], ["cameras", "cameras", 0],
+  ["rate_hz", "rate (Hz)", 1], ["reconstructed_fraction", "reconstructed", "%"],
+  ["labelled_fraction", "labelled", "%"], ["markers_reconstructed", "markers seen", 0],
+  ["rms_ray_px", "RMS ray residual (px)", 3], ["gaps", "gaps", 0],
+  ["longest_gap_frames", "longest gap (frames)", 0], ["markers_never_seen", "markers never seen", 0],
+  ["lost_frames", "lost frames", 0], ["ghosts_rejected", "ghosts rejected", 0],
+];
+
+function qualityValue(v, how) {
+  if (v === null || v === undefined) return "—";
+  return how === "%" ? (100 * v).toFixed(2) + " %" : fmt(v, typeof v === "number" && !Number.isInteger(v) ? how : undefined);
+}
+
+// The trials table's "processed" cell: the last processing's headline numbers.
+function processedText(p) {
+  if (!p || !p.quality) return "";
+  const q = p.quality;
+  const share = q.reconstructed_fraction ?? q.labelled_fraction;
+  return qualityValue(share, "%") + " · RMS " + qualityValue(q.rms_ray_px, 2) + " · " + q.gaps + " gaps";
+}
+
+let processing = null; // id of the trial shown in the panel
+let processTimer = null;
+
+function showJob(job) {
+  document.getElementById("process-trial").textContent = job.trial + " (" + (job.path || "…") + ")";
+  const bar = document.getElementById("process-progress");
+  bar.value = job.state === "done" ? 1 : job.fraction;
+  const stage = job.state === "running"
+    ? (job.stage || "starting") + " " + (job.detail || "") : job.state + " in " + fmt(job.elapsed_s, 1) + " s";
+  say("process-stage", stage, job.state === "failed");
+  const body = document.querySelector("#process-quality tbody");
+  body.replaceChildren();
+  const q = job.quality || {};
+  for (const [key, label, how] of QUALITY) {
+    if (!(key in q)) continue;
+    const tr = el("tr", { "data-key": key });
+    tr.appendChild(el("th", {}, label));
+    tr.appendChild(el("td", {}, qualityValue(q[key], how)));
+    body.appendChild(tr);
+  }
+  for (const [cam, rms] of Object.entries(q.rms_ray_px_per_camera || {})) {
+    const tr = el("tr", { "data-key": "rms:" + cam });
+    tr.appendChild(el("th", {}, "RMS ray residual (px) " + cam));
+    tr.appendChild(el("td", {}, fmt(rms, 3)));
+    body.appendChild(tr);
+  }
+  const notes = document.getElementById("process-notes");
+  notes.replaceChildren(...[job.error, ...job.notes].filter(Boolean).map((n) => el("li", {}, n)));
+  document.getElementById("process-actions").hidden = job.state !== "done";
+}
+
+function pollJob(id) {
+  clearTimeout(processTimer);
+  api("/api/trials/" + encodeURIComponent(id) + "/process").then((job) => {
+    if (processing !== id) return;
+    showJob(job);
+    if (job.state === "running") processTimer = setTimeout(() => pollJob(id), 250);
+    else refreshTrials();
+  }).catch((e) => say("process-msg", e.message, true));
+}
+
+function processTrial(id) {
+  processing = id;
+  document.getElementById("process-panel").hidden = false;
+  say("process-msg", "");
+  api("/api/trials/" + encodeURIComponent(id) + "/process", { method: "POST", body: "{}" })
+    .then((job) => { showJob(job); pollJob(id); })
+    .catch((e) => say("process-msg", id + ": " + e.message, true));
+}
+
+for (const format of ["c3d", "trc"]) {
+  const button = document.getElementById("process-" + format);
+  button.addEventListener("click", () => {
+    button.disabled = true;
+    api("/api/trials/" + encodeURIComponent(processing) + "/export", { method: "POST", body: JSON.stringify({ format }) })
+      .then((r) => { say("process-msg", processing + " → " + r.file + " (" + r.frames + " frames, " + r.markers + " markers)"); refreshTrials(); })
+      .catch((e) => say("process-msg", e.message, true))
+      .finally(() => { button.disabled = false; });
+  });
 }
 
 // ---- the live socket ------------------------------------------------------------------
