@@ -109,6 +109,18 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
     b = np.array([p if p else [np.nan] * 3 for p in second["points"]], dtype=float)
     assert np.nanmax(np.abs(a - b)) > 1.0  # mm
     assert page.locator("#views2d canvas").count() >= 4  # 2 SELSPOT + 2 hub cameras
+    # a marker over time: x, y, z of the chosen one drawn from the last seconds
+    page.wait_for_function("document.getElementById('series-marker').options.length === 8")
+    page.select_option("#series-marker", "2")
+    page.wait_for_function("window.spotlab.series.length > 20")
+    blank = page.evaluate("(() => { const c = document.createElement('canvas'); c.width = 520; "
+                          "c.height = 180; return c.toDataURL(); })()")  # fmt: skip
+    assert page.evaluate("document.getElementById('series').toDataURL()") != blank
+    # link health: one strip per device, per-second counts
+    page.wait_for_function(
+        "document.querySelectorAll('#health canvas').length === 3", timeout=10_000
+    )
+    assert "lost" in page.inner_text("#health div[data-device='selspot']")
     _shot(page, "1-devices-and-views")
     # record a 5 s trial from the page
     page.fill("#trial", "walk5s")

@@ -67,6 +67,24 @@ def test_store_keeps_trials_inside_the_data_folder(tmp_path: Path) -> None:
         store.load("S01.walk.t2")
 
 
+def test_link_health_counts_per_second_and_restarts_with_a_session() -> None:
+    from spotlab.console.web.link_health import LinkHealth
+
+    rows = [{"name": "a", "frames": 0, "lost_frames": 0, "crc_errors": 0}]
+    health = LinkHealth(lambda: [dict(r) for r in rows])
+    for t, (frames, lost, crc) in enumerate([(0, 0, 0), (100, 1, 0), (200, 1, 2), (50, 0, 0)]):
+        rows[0].update(frames=frames, lost_frames=lost, crc_errors=crc)
+        health.sample(now=float(t))
+    got = health.snapshot()["devices"]["a"]
+    # the first read is the baseline; a counter that went down is a new session's
+    assert got == {
+        "t": [1.0, 2.0, 3.0],
+        "frames": [100, 100, 50],
+        "lost": [1, 0, 0],
+        "crc": [0, 2, 0],
+    }
+
+
 # ---- a real console process ------------------------------------------------------------
 class Console:
     """A ``spotlab console`` child process and a small client of its API."""
@@ -154,6 +172,13 @@ def test_sim_console_api_records_and_exports(
         return devices if all(d["connected"] and d["frames"] > 0 for d in devices) else None
 
     devices = c.until(connected)
+    # link health: per-second increases of each device's counters
+    health = c.until(
+        lambda: (h := c.call("/api/health")[1])["devices"].get("selspot", {}).get("t", [])[1:] and h
+    )
+    assert set(health["devices"]) <= {"selspot", "centroid", "timer"} and health["window_s"] == 60
+    assert all(v >= 0 for d in health["devices"].values() for k in ("lost", "crc") for v in d[k])
+    assert max(health["devices"]["selspot"]["frames"]) > 0, health
     latency = c.until(lambda: c.call("/api/status")[1]["live_latency"])
     assert latency["frames"] > 0 and latency["p50_us"] > 0, latency
     assert {d["family"] for d in devices} == {"selspot", "centroid", "timer"}

@@ -25,6 +25,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from spotlab import __version__
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.export import export_trial
+from spotlab.console.web.link_health import LinkHealth
 from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo
 from spotlab.processing.errors import InputError
@@ -50,6 +51,8 @@ def make_app(
     """
     lab = acq.plan.lab
     jobs = processor or Processor(acq.store, lab.rig, lab.model, lab.path)
+    health = LinkHealth(acq.devices)
+    health.start()
 
     def allowed(given: str | None) -> bool:
         return token is None or (given is not None and hmac.compare_digest(given, token))
@@ -75,6 +78,9 @@ def make_app(
 
     async def devices(request: Request) -> Response:
         return await guard(request) or JSONResponse({"devices": acq.devices()})
+
+    async def link_health(request: Request) -> Response:
+        return await guard(request) or JSONResponse(health.snapshot())
 
     async def trials(request: Request) -> Response:
         return await guard(request) or JSONResponse(
@@ -196,6 +202,7 @@ def make_app(
         Route("/", index),
         Route("/api/status", status),
         Route("/api/devices", devices),
+        Route("/api/health", link_health),
         Route("/api/trials", trials),
         Route("/api/trials/start", start, methods=["POST"]),
         Route("/api/trials/stop", stop, methods=["POST"]),

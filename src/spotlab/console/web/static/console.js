@@ -309,6 +309,98 @@ for (const format of ["c3d", "trc"]) {
   });
 }
 
+// ---- a marker over time (client side, from the live messages) ----------------------
+const SERIES_S = 5;
+const series = []; // [time_s, points] of the last SERIES_S seconds
+received.series = series;
+
+function keepSeries(markers) {
+  if (!markers || markers.time_s === null || markers.time_s === undefined) return;
+  const last = series[series.length - 1];
+  if (last && markers.time_s < last[0]) series.length = 0; // a new session: time restarts
+  if (last && markers.time_s === last[0]) return;
+  series.push([markers.time_s, markers.points]);
+  while (series.length && series[0][0] < markers.time_s - SERIES_S) series.shift();
+  const select = document.getElementById("series-marker");
+  const labels = markers.labels || [];
+  if (select.options.length !== labels.length) {
+    const chosen = select.value;
+    select.replaceChildren(...labels.map((l, i) => el("option", { value: String(i) }, l || "m" + i)));
+    if (chosen && Number(chosen) < labels.length) select.value = chosen;
+  }
+}
+
+function showSeries() {
+  const canvas = document.getElementById("series");
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  const m = Number(document.getElementById("series-marker").value || 0);
+  if (series.length < 2) return;
+  const t1 = series[series.length - 1][0];
+  const colours = ["#ef5350", "#66bb6a", "#42a5f5"];
+  for (let axis = 0; axis < 3; axis++) {
+    const values = series.map(([t, pts]) => [t, pts[m] ? pts[m][axis] : null]);
+    const seen = values.filter(([, v]) => v !== null).map(([, v]) => v);
+    if (!seen.length) continue;
+    const lo = Math.min(...seen), hi = Math.max(...seen), span = Math.max(hi - lo, 1);
+    const band = canvas.height / 3;
+    g.strokeStyle = colours[axis];
+    g.beginPath();
+    let pen = false;
+    for (const [t, v] of values) {
+      if (v === null) { pen = false; continue; }
+      const x = canvas.width * (1 - (t1 - t) / SERIES_S);
+      const y = band * axis + band - 4 - (band - 8) * (v - lo) / span;
+      if (pen) g.lineTo(x, y); else g.moveTo(x, y);
+      pen = true;
+    }
+    g.stroke();
+    g.fillStyle = colours[axis];
+    g.fillText(fmt(seen[seen.length - 1], 1) + " mm", 4, band * axis + 12);
+  }
+}
+
+// ---- link health over time (GET /api/health once a second) ----------------------------
+function drawHealth(canvas, d) {
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  const n = 60, w = canvas.width / n, h = canvas.height;
+  const fps = Math.max(1, ...d.frames);
+  const offset = n - d.t.length;
+  g.strokeStyle = "#90a4ae";
+  g.beginPath();
+  d.frames.forEach((f, i) => { const x = (offset + i + 0.5) * w, y = h - 2 - (h - 4) * f / fps; if (i) g.lineTo(x, y); else g.moveTo(x, y); });
+  g.stroke();
+  const worst = Math.max(1, ...d.lost, ...d.crc);
+  d.t.forEach((_, i) => {
+    const x = (offset + i) * w;
+    if (d.lost[i] > 0) { g.fillStyle = "#ef5350"; const bh = Math.max(2, (h / 2) * d.lost[i] / worst); g.fillRect(x, h - bh, w / 2, bh); }
+    if (d.crc[i] > 0) { g.fillStyle = "#ffa726"; const bh = Math.max(2, (h / 2) * d.crc[i] / worst); g.fillRect(x + w / 2, h - bh, w / 2, bh); }
+  });
+}
+
+function refreshHealth() {
+  api("/api/health").then((health) => {
+    received.health = health;
+    const box = document.getElementById("health");
+    for (const [name, d] of Object.entries(health.devices)) {
+      let canvas = box.querySelector("canvas[data-device='" + CSS.escape(name) + "']");
+      let label = box.querySelector("div[data-device='" + CSS.escape(name) + "'] span");
+      if (!canvas) {
+        const div = el("div", { class: "dev", "data-device": name });
+        label = el("span");
+        canvas = el("canvas", { width: "480", height: "40", "data-device": name });
+        div.append(label, canvas);
+        box.appendChild(div);
+      }
+      const sumOf = (a) => a.reduce((x, y) => x + y, 0);
+      label.textContent = name + ": " + sumOf(d.lost) + " lost, " + sumOf(d.crc) + " CRC errors in " + d.t.length + " s · "
+        + fmt(d.t.length > 1 ? d.frames[d.t.length - 1] / (d.t[d.t.length - 1] - d.t[d.t.length - 2]) : null, 0) + " frames/s";
+      drawHealth(canvas, d);
+    }
+  }).catch(() => {});
+}
+
 // ---- the live socket ------------------------------------------------------------------
 let lastMode = null;
 function connect() {
@@ -332,6 +424,8 @@ function connect() {
     showBanner(m.status, m.devices);
     show2d(m.views);
     show3d(m.markers, m.status.cameras);
+    keepSeries(m.markers);
+    showSeries();
     if (lastMode !== m.status.mode) { lastMode = m.status.mode; refreshTrials(); }
   };
 }
@@ -339,3 +433,5 @@ function connect() {
 refreshTrials();
 connect();
 setInterval(refreshTrials, 3000);
+refreshHealth();
+setInterval(refreshHealth, 1000);
