@@ -121,6 +121,16 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
         "document.querySelectorAll('#health canvas').length === 3", timeout=10_000
     )
     assert "lost" in page.inner_text("#health div[data-device='selspot']")
+    # a device reconnected from the page: the preview starts again and it comes back
+    page.select_option("#device-name", "timer")
+    assert page.is_disabled("#device-set-rate") is False
+    page.click("#device-reconnect")
+    page.wait_for_function(
+        "document.getElementById('device-msg').textContent.includes('reconnect asked')"
+    )
+    page.wait_for_function(
+        "document.querySelectorAll('#devices td.ok').length === 3", timeout=20_000
+    )
     _shot(page, "1-devices-and-views")
     # record a 5 s trial from the page
     page.fill("#trial", "walk5s")

@@ -227,6 +227,7 @@ def test_sim_console_api_records_and_exports(
     assert side["processing"]["quality"] == q and side["processing"]["path"] == "triangulation"
     code, result = c.call("/api/trials/S01.walk.t1/export", {"format": "c3d"})
     assert code == 200 and result["processed"] and result["frames"] == q["frames"], result
+
     # a second console on the same port: one error line, non-zero
     port = c.base.rsplit(":", 1)[1]
     second = subprocess.run(
@@ -249,6 +250,35 @@ def test_sim_console_api_records_and_exports(
     last = json.loads((data / "S01" / "walk" / "t3.json").read_text())
     assert last["state"] == "done" and min(last["frames"].values()) > 0, last
     assert last["messages"] == ["stopped when the console was stopped"], last
+
+
+@pytest.mark.long
+def test_a_device_rate_set_and_a_reconnect_from_the_api(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    c = console("--sim", "--data", str(tmp_path / "data"))
+
+    # a rate set from the page and a reconnect (the preview starts again)
+    def selspot() -> dict[str, Any]:
+        rows = c.call("/api/devices")[1]["devices"]
+        row: dict[str, Any] = next(d for d in rows if d["name"] == "selspot")
+        return row
+
+    assert c.call("/api/devices/nope/reconnect", {})[0] == 404
+    assert c.call("/api/devices/selspot/configure", {"rate_hz": -1})[0] == 400
+    assert c.call("/api/devices/selspot/configure", {"rate_hz": "x"})[0] == 400
+    code, body = c.call("/api/devices/selspot/configure", {"rate_hz": 50})
+    assert code == 200 and body == {"device": "selspot", "rate_hz": 50.0, "restarting": True}
+    row = c.until(lambda: (r := selspot())["rate_hz"] == 50.0 and r["frames"] > 40 and r)
+    assert row["connected"] and row["rate_settable"], row
+    assert c.call("/api/devices/timer/reconnect", {})[0] == 202
+    c.until(lambda: (r := selspot())["connected"] and 0 < r["frames"] < row["frames"])
+    # refused while a trial is recorded
+    assert c.call("/api/trials/start", {"subject": "S", "session": "s", "trial": "t"})[0] == 201
+    c.until(lambda: c.call("/api/status")[1]["mode"] == "recording")
+    assert c.call("/api/devices/selspot/reconnect", {})[0] == 409
+    assert c.call("/api/devices/selspot/configure", {"rate_hz": 60})[0] == 409
+    assert c.call("/api/trials/stop", {})[0] == 200
 
 
 def test_missing_port_device_drop_and_token(

@@ -25,6 +25,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from spotlab import __version__
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.export import export_trial
+from spotlab.console.web.lab_setup import with_rate
 from spotlab.console.web.link_health import LinkHealth
 from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo
@@ -78,6 +79,31 @@ def make_app(
 
     async def devices(request: Request) -> Response:
         return await guard(request) or JSONResponse({"devices": acq.devices()})
+
+    async def reconnect(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        name = request.path_params["name"]
+        if name not in acq.plan.names():
+            return _error(404, f"no device {name!r} in the lab")
+        try:
+            acq.restart()
+        except InputError as exc:
+            return _error(409, str(exc))
+        return JSONResponse({"device": name, "restarting": True}, status_code=202)
+
+    async def configure(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        name = request.path_params["name"]
+        if name not in acq.plan.names():
+            return _error(404, f"no device {name!r} in the lab")
+        try:
+            raw = await body(request)
+            acq.restart(with_rate(acq.plan, name, raw.get("rate_hz")))
+        except InputError as exc:
+            return _error(409 if "being recorded" in str(exc) else 400, str(exc))
+        return JSONResponse({"device": name, "rate_hz": float(raw["rate_hz"]), "restarting": True})
 
     async def link_health(request: Request) -> Response:
         return await guard(request) or JSONResponse(health.snapshot())
@@ -202,6 +228,8 @@ def make_app(
         Route("/", index),
         Route("/api/status", status),
         Route("/api/devices", devices),
+        Route("/api/devices/{name}/reconnect", reconnect, methods=["POST"]),
+        Route("/api/devices/{name}/configure", configure, methods=["POST"]),
         Route("/api/health", link_health),
         Route("/api/trials", trials),
         Route("/api/trials/start", start, methods=["POST"]),

@@ -49,6 +49,31 @@ function showDevices(devices) {
   }
 }
 
+// The device form (outside the table, which is rebuilt with every message).
+function showDeviceChoices(devices) {
+  const select = document.getElementById("device-name");
+  const names = devices.map((d) => d.name);
+  if (Array.from(select.options).map((o) => o.value).join("\n") !== names.join("\n")) {
+    const chosen = select.value;
+    select.replaceChildren(...names.map((n) => el("option", { value: n }, n)));
+    if (names.includes(chosen)) select.value = chosen;
+  }
+  const d = devices.find((x) => x.name === select.value);
+  document.getElementById("device-set-rate").disabled = recording || !(d && d.rate_settable);
+  document.getElementById("device-reconnect").disabled = recording;
+}
+
+function deviceAction(what, body) {
+  const name = document.getElementById("device-name").value;
+  say("device-msg", name + ": " + what + "…");
+  api("/api/devices/" + encodeURIComponent(name) + "/" + what, { method: "POST", body: JSON.stringify(body) })
+    .then(() => say("device-msg", name + ": " + what + " asked; the devices start again"))
+    .catch((e) => say("device-msg", name + ": " + e.message, true));
+}
+document.getElementById("device-reconnect").addEventListener("click", () => deviceAction("reconnect", {}));
+document.getElementById("device-set-rate").addEventListener("click", () =>
+  deviceAction("configure", { rate_hz: Number(document.getElementById("device-rate").value) }));
+
 function showBanner(status, devices) {
   const lines = [];
   for (const d of devices) if (d.last_error) lines.push(d.name + ": " + d.last_error);
@@ -421,6 +446,7 @@ function connect() {
     }
     showMode(m.status);
     showDevices(m.devices);
+    showDeviceChoices(m.devices);
     showBanner(m.status, m.devices);
     show2d(m.views);
     show3d(m.markers, m.status.cameras);
