@@ -363,3 +363,49 @@ def test_a_trial_whose_devices_cannot_start_fails_and_leaves_no_journal(tmp_path
     assert warned == [f"device timer: port {tmp_path / 'gone'} does not exist"]
     with pytest.raises(InputError, match="exists"):
         acq.start_trial(TrialInfo("S", "s", "t"))
+
+
+@pytest.mark.long
+def test_the_calibration_wizard_on_the_simulated_hub(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    data = tmp_path / "data"
+    c = console("--sim", "--data", str(data))
+    assert c.call("/api/calibration")[1]["step"] == "idle"
+    assert c.call("/api/calibration/run", {})[0] == 400
+    assert c.call("/api/calibration/lframe", {"seconds": 1})[0] == 400
+    assert c.call("/api/calibration/figure")[0] == 404
+    body = {"subject": "S01", "session": "cal", "seconds": 8}
+    code, state = c.call("/api/calibration/wand", body)
+    assert code == 202 and state["step"] == "wand", state
+    assert c.call("/api/calibration/wand", body)[0] == 409  # busy
+    # the live coverage grows while the wand is waved
+    first = c.until(lambda: (s := c.call("/api/calibration")[1])["coverage"] and s)["coverage"]
+    state = c.until(lambda: (s := c.call("/api/calibration")[1])["step"] != "wand" and s, 30)
+    assert state["step"] == "wand_done", state
+    assert set(state["coverage"]) == {"cam1", "cam2", "cam3", "cam4"}
+    assert all(state["coverage"][k] >= first.get(k, 0) for k in state["coverage"])
+    assert min(state["coverage"].values()) > 0.1, state
+    assert c.call("/api/calibration/lframe", {"seconds": 2})[0] == 202
+    state = c.until(lambda: (s := c.call("/api/calibration")[1])["step"] != "lframe" and s, 20)
+    assert state["step"] == "lframe_done", state
+    assert c.call("/api/calibration/run", {})[0] == 202
+    state = c.until(lambda: (s := c.call("/api/calibration")[1])["step"] != "calibrating" and s, 90)
+    assert state["step"] == "calibrated", state
+    report = state["report"]
+    assert [cam["name"] for cam in report["cameras"]] == ["cam1", "cam2", "cam3", "cam4"]
+    assert all(0 < cam["reprojection_rms"] < 1 for cam in report["cameras"]), report
+    with urllib.request.urlopen(c.base + "/api/calibration/figure", timeout=10) as response:
+        assert response.headers["content-type"] == "image/png"
+        assert response.read(8) == b"\x89PNG\r\n\x1a\n"
+    # the lab's devices are back
+    c.until(
+        lambda: (
+            {d["name"] for d in c.call("/api/devices")[1]["devices"]}
+            == {"selspot", "centroid", "timer"}
+        )
+    )
+    code, state = c.call("/api/calibration/accept", {})
+    assert code == 200 and state["step"] == "accepted" and state["rig"] == "S01/cal/rig.toml"
+    assert (data / "S01" / "cal" / "rig.toml").is_file()
+    assert (data / "S01" / "cal" / "rig.candidate.report.png").is_file()

@@ -24,6 +24,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from spotlab import __version__
 from spotlab.console.web.acquisition import Acquisition
+from spotlab.console.web.calibration_wizard import CalibrationWizard
 from spotlab.console.web.export import export_trial
 from spotlab.console.web.lab_setup import with_rate
 from spotlab.console.web.link_health import LinkHealth
@@ -54,6 +55,7 @@ def make_app(
     jobs = processor or Processor(acq.store, lab.rig, lab.model, lab.path)
     health = LinkHealth(acq.devices)
     health.start()
+    wizard = CalibrationWizard(acq, jobs)
 
     def allowed(given: str | None) -> bool:
         return token is None or (given is not None and hmac.compare_digest(given, token))
@@ -104,6 +106,31 @@ def make_app(
         except InputError as exc:
             return _error(409 if "being recorded" in str(exc) else 400, str(exc))
         return JSONResponse({"device": name, "rate_hz": float(raw["rate_hz"]), "restarting": True})
+
+    async def calibration(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        step = request.path_params.get("step")
+        if request.url.path.endswith("/figure"):
+            try:
+                return FileResponse(wizard.figure(), media_type="image/png")
+            except InputError as exc:
+                return _error(404, str(exc))
+        if step is None:
+            return JSONResponse(wizard.snapshot())
+        try:
+            raw = await body(request)
+            if step in ("wand", "lframe"):
+                wizard.record(step, raw.get("subject"), raw.get("session"), raw.get("seconds"))
+            elif step == "run":
+                wizard.calibrate()
+            elif step == "accept":
+                wizard.accept()
+            else:
+                return _error(404, f"no calibration step {step!r}")
+        except InputError as exc:
+            return _error(409 if "busy" in str(exc) or "being" in str(exc) else 400, str(exc))
+        return JSONResponse(wizard.snapshot(), status_code=202 if step != "accept" else 200)
 
     async def link_health(request: Request) -> Response:
         return await guard(request) or JSONResponse(health.snapshot())
@@ -169,7 +196,7 @@ def make_app(
                 acq.store,
                 info,
                 raw.get("format", "c3d"),
-                jobs.rig,
+                jobs.rig_for(info),
                 lab.path,
                 jobs.result(info.id),
             )
@@ -231,6 +258,9 @@ def make_app(
         Route("/api/devices/{name}/reconnect", reconnect, methods=["POST"]),
         Route("/api/devices/{name}/configure", configure, methods=["POST"]),
         Route("/api/health", link_health),
+        Route("/api/calibration", calibration),
+        Route("/api/calibration/figure", calibration),
+        Route("/api/calibration/{step}", calibration, methods=["POST"]),
         Route("/api/trials", trials),
         Route("/api/trials/start", start, methods=["POST"]),
         Route("/api/trials/stop", stop, methods=["POST"]),

@@ -6,7 +6,8 @@ video-centroid hub) is identified with the lab's marker model (or the one stored
 recording) by :func:`spotlab.processing.reconstruct_file`; any other recording has its
 ``image2d`` streams (SELSPOT-style cameras) triangulated with the lab's rig by
 :func:`spotlab.processing.reconstruct_recording` (on session time when it holds a timer
-stream). Both with the lab's current rig.
+stream). Both with the rig of the trial's session (``rig.toml``, accepted there in the
+calibration wizard) or else the lab's.
 
 One trial is processed at a time, in a daemon thread niced below the acquisition's
 threads (Linux: a thread's own nice value); nothing of the acquisition waits for it.
@@ -193,7 +194,7 @@ class Processor:
                 if info.state == "recording"
                 else f"trial {info.id} failed: it holds no recording"
             )
-        if self.rig is None:
+        if self.rig_for(info) is None:
             raise InputError(f"lab file {self.lab} names no rig: a trial is processed with one")
         with self.lock:
             old = self._jobs.get(info.id)
@@ -204,6 +205,12 @@ class Processor:
             self._results.pop(info.id, None)
         self._queue.put((info, job))
         return job
+
+    def rig_for(self, info: TrialInfo) -> Path | None:
+        """The rig of a trial: its session folder's ``rig.toml`` (accepted in the
+        calibration wizard) when there is one, else the lab's."""
+        accepted = self.store.resolve(info.subject, info.session, "rig.toml")
+        return accepted if accepted.is_file() else self.rig
 
     def job(self, tid: str) -> dict[str, Any] | None:
         """The job of a trial (JSON-safe), or None if it was not processed here."""
@@ -250,7 +257,8 @@ class Processor:
             self._results[info.id] = result
             try:
                 saved = self.store.load(info.id)
-                saved.processing = {"path": job.path, "quality": numbers, "rig": str(self.rig)}
+                rig = str(self.rig_for(info))
+                saved.processing = {"path": job.path, "quality": numbers, "rig": rig}
                 self.store.save(saved)
             except (InputError, OSError, ValueError) as exc:
                 job.notes.append(f"the sidecar could not be updated: {exc}")
@@ -258,7 +266,7 @@ class Processor:
 
     def _reconstruct(self, info: TrialInfo, job: ProcessJob, factory: Any) -> Reconstruction:
         journal = self.store.journal(info.subject, info.session, info.trial)
-        rig = self.rig
+        rig = self.rig_for(info)
         if rig is None:
             raise InputError(f"lab file {self.lab} names no rig")
         if processing.is_blob_recording(journal):
