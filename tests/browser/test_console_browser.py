@@ -121,16 +121,6 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
         "document.querySelectorAll('#health canvas').length === 3", timeout=10_000
     )
     assert "lost" in page.inner_text("#health div[data-device='selspot']")
-    # a device reconnected from the page: the preview starts again and it comes back
-    page.select_option("#device-name", "timer")
-    assert page.is_disabled("#device-set-rate") is False
-    page.click("#device-reconnect")
-    page.wait_for_function(
-        "document.getElementById('device-msg').textContent.includes('reconnect asked')"
-    )
-    page.wait_for_function(
-        "document.querySelectorAll('#devices td.ok').length === 3", timeout=20_000
-    )
     _shot(page, "1-devices-and-views")
     # record a 5 s trial from the page
     page.fill("#trial", "walk5s")
@@ -243,3 +233,48 @@ def test_a_missing_port_is_shown_in_the_page(browser: Any, tmp_path: Path) -> No
         code = proc.wait(timeout=20)
     assert code == 0
     assert f"spotlab: warning: device sync: port {missing} does not exist" in err.read_text()
+
+
+@pytest.mark.long
+def test_the_calibration_wizard_in_the_page(sim_console: tuple[str, Path], browser: Any) -> None:
+    url, data = sim_console
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    page.goto(url)
+    page.wait_for_function("window.spotlab.calibration && window.spotlab.messages > 0")
+    # first, a device reconnected from the page: the preview starts again and it comes back
+    page.select_option("#device-name", "timer")
+    assert page.is_disabled("#device-set-rate") is False
+    page.click("#device-reconnect")
+    page.wait_for_function(
+        "document.getElementById('device-msg').textContent.includes('reconnect asked')"
+    )
+    page.wait_for_function(
+        "document.querySelectorAll('#devices td.ok').length === 3", timeout=20_000
+    )
+    page.fill("#cal-session", "wizard")
+    page.fill("#cal-wand-seconds", "8")
+    page.click("#cal-wand")
+    # the coverage of each camera shows and grows while the wand is waved
+    page.wait_for_function(
+        "document.querySelectorAll('#cal-coverage tbody tr').length === 4", timeout=15_000
+    )
+    _shot(page, "6-wand-dance")
+    page.wait_for_function("!document.getElementById('cal-lframe').disabled", timeout=30_000)
+    cover = page.evaluate("window.spotlab.calibration.coverage")
+    assert min(cover.values()) > 0.1, cover
+    page.click("#cal-lframe")
+    page.wait_for_function("!document.getElementById('cal-run').disabled", timeout=30_000)
+    page.click("#cal-run")
+    page.wait_for_function("!document.getElementById('cal-accept').disabled", timeout=120_000)
+    page.wait_for_function(
+        "document.getElementById('cal-figure').complete && "
+        "document.getElementById('cal-figure').naturalWidth > 0"
+    )
+    rms = page.inner_text("#cal-coverage tr[data-camera='cam1'] td:nth-child(3)")
+    assert float(rms.split()[0]) < 1, rms
+    assert page.inner_text("#cal-verdict").startswith("verdict: ")
+    page.click("#cal-accept")
+    page.wait_for_function("window.spotlab.calibration.step === 'accepted'")
+    assert (data / "S01" / "wizard" / "rig.toml").is_file()
+    _shot(page, "7-calibrated")
+    page.close()

@@ -426,6 +426,77 @@ function refreshHealth() {
   }).catch(() => {});
 }
 
+// ---- calibration wizard (GET /api/calibration, POST .../wand, lframe, run, accept) ----
+let calTimer = null;
+const CAL_WORDS = {
+  idle: "not started", wand: "recording the wand dance: wave it through the volume",
+  wand_done: "wand dance recorded", lframe: "recording the L-frame: leave it still on the floor",
+  lframe_done: "L-frame recorded", calibrating: "calibrating…", calibrated: "calibrated: check the report, then accept",
+  accepted: "accepted", failed: "failed",
+};
+
+function showCalibration(c) {
+  received.calibration = c;
+  const busy = ["wand", "lframe", "calibrating"].includes(c.step);
+  let text = CAL_WORDS[c.step] || c.step;
+  if (c.step === "accepted") text += ": " + c.rig + " is the rig of session " + c.subject + "/" + c.session;
+  if (c.error) text += ": " + c.error;
+  say("cal-step", text, c.step === "failed");
+  document.getElementById("cal-wand").disabled = busy;
+  document.getElementById("cal-lframe").disabled = busy || !["wand_done", "lframe_done", "failed"].includes(c.step) || !c.wand_trial;
+  document.getElementById("cal-run").disabled = busy || !c.lframe_trial || c.step === "accepted";
+  document.getElementById("cal-accept").disabled = c.step !== "calibrated";
+  const report = c.report || { cameras: [] };
+  const names = Array.from(new Set([...Object.keys(c.coverage || {}), ...report.cameras.map((x) => x.name)]));
+  const body = document.querySelector("#cal-coverage tbody");
+  body.replaceChildren();
+  for (const name of names) {
+    const tr = el("tr", { "data-camera": name });
+    const share = (c.coverage || {})[name];
+    const td = el("td");
+    if (share !== undefined) {
+      const bar = el("span", { class: "bar" });
+      bar.style.width = (100 * share).toFixed(0) + "px";
+      td.append(bar, document.createTextNode((100 * share).toFixed(1) + " %"));
+    }
+    const cam = report.cameras.find((x) => x.name === name);
+    tr.append(el("td", {}, name), td,
+      el("td", {}, cam ? fmt(cam.reprojection_rms, 3) + " " + report.units : ""),
+      el("td", {}, cam ? String(cam.observations) : ""));
+    body.appendChild(tr);
+  }
+  say("cal-verdict", c.report ? "verdict: " + c.report.verdict + ", wand length SD " + fmt(c.report.wand_sd_mm, 3) + " mm"
+    + (c.report.reasons.length ? " · " + c.report.reasons.join(" · ") : "") : "");
+  const img = document.getElementById("cal-figure");
+  const shown = c.step === "calibrated" || c.step === "accepted";
+  if (shown && img.dataset.candidate !== c.candidate) {
+    img.dataset.candidate = c.candidate;
+    img.src = "/api/calibration/figure?t=" + Date.now() + (token ? "&token=" + encodeURIComponent(token) : "");
+  }
+  img.hidden = !shown;
+  clearTimeout(calTimer);
+  if (busy) calTimer = setTimeout(pollCalibration, 300);
+}
+
+function pollCalibration() {
+  api("/api/calibration").then(showCalibration).catch((e) => say("cal-step", e.message, true));
+}
+
+function calibrationStep(step, body) {
+  api("/api/calibration/" + step, { method: "POST", body: JSON.stringify(body || {}) })
+    .then((c) => { showCalibration(c); refreshTrials(); })
+    .catch((e) => say("cal-step", e.message, true));
+}
+document.getElementById("cal-wand").addEventListener("click", () => calibrationStep("wand", {
+  subject: document.getElementById("cal-subject").value, session: document.getElementById("cal-session").value,
+  seconds: Number(document.getElementById("cal-wand-seconds").value),
+}));
+document.getElementById("cal-lframe").addEventListener("click", () => calibrationStep("lframe", {
+  seconds: Number(document.getElementById("cal-lframe-seconds").value),
+}));
+document.getElementById("cal-run").addEventListener("click", () => calibrationStep("run"));
+document.getElementById("cal-accept").addEventListener("click", () => calibrationStep("accept"));
+
 // ---- the live socket ------------------------------------------------------------------
 let lastMode = null;
 function connect() {
@@ -461,3 +532,4 @@ connect();
 setInterval(refreshTrials, 3000);
 refreshHealth();
 setInterval(refreshHealth, 1000);
+pollCalibration();
