@@ -269,4 +269,7 @@ def make_app(
         WebSocketRoute("/api/live", live),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
-    return Starlette(routes=routes)
+    app = Starlette(routes=routes)
+    # what the server ends after serving: the health sampler, the processing worker
+    app.state.closers = [health.close, jobs.close]
+    return app
