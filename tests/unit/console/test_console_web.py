@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from spotlab.console.cli import main
@@ -83,6 +84,16 @@ def test_link_health_counts_per_second_and_restarts_with_a_session() -> None:
         "lost": [1, 0, 0],
         "crc": [0, 2, 0],
     }
+
+
+def test_gap_counts_of_trajectories() -> None:
+    from spotlab.console.web.processing_jobs import gap_counts
+
+    nan = np.nan
+    x = np.array([[1, nan, 1], [nan, nan, 1], [nan, nan, nan], [1, nan, 1], [nan, nan, 1]])
+    points = np.repeat(x[:, :, None], 3, axis=2)  # (F=5, M=3, 3)
+    # marker 0: one gap of 2 frames (the trailing miss is not a gap); marker 2: one of 1
+    assert gap_counts(points) == {"gaps": 2, "longest_gap_frames": 2, "markers_never_seen": 1}
 
 
 # ---- a real console process ------------------------------------------------------------

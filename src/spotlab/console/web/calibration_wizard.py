@@ -97,6 +97,8 @@ class CalibrationWizard:
                 sub, ses = check_name("subject", subject), check_name("session", session)
             else:
                 sub, ses = self.state["subject"], self.state["session"]
+            if [d.name for d in self.acq.plan.lab.devices] != [STREAM]:
+                self.lab_plan = self.acq.plan  # the lab's, as set now (a rate set included)
             info = TrialInfo(sub, ses, self._free_name(sub, ses, f"calib_{what}"))
             info.notes = f"calibration wizard: {what}"
             self.acq.restart(self._plan(what))
