@@ -198,7 +198,7 @@ def make_app(
                 raw.get("format", "c3d"),
                 jobs.rig_for(info),
                 lab.path,
-                jobs.result(info.id),
+                jobs.result(info),
             )
         except InputError as exc:
             return _error(409 if "being recorded" in str(exc) else 400, str(exc))

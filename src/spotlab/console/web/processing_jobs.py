@@ -159,6 +159,14 @@ def quality(result: Reconstruction) -> dict[str, Any]:
     return dict(_json_safe(out))
 
 
+def _stamp(rig: Path) -> tuple[str, int]:
+    """A rig file's path and modification time (ns; 0 if it cannot be read)."""
+    try:
+        return str(rig), rig.stat().st_mtime_ns
+    except OSError:
+        return str(rig), 0
+
+
 class Processor:
     """Processes trials of a data folder, one at a time, in a daemon thread.
 
@@ -180,6 +188,7 @@ class Processor:
         self.lock = threading.Lock()
         self._jobs: dict[str, ProcessJob] = {}
         self._results: dict[str, Reconstruction] = {}
+        self._rig_used: dict[str, tuple[str, int]] = {}  # trial -> (rig, its mtime_ns)
         self._started: dict[str, float] = {}
         self._queue: queue.Queue[tuple[TrialInfo, ProcessJob] | None] = queue.Queue()
         self._thread = threading.Thread(target=self._work, name="console-process", daemon=True)
@@ -222,10 +231,15 @@ class Processor:
                 job.elapsed_s = round(time.monotonic() - self._started[tid], 3)
             return job.to_dict()
 
-    def result(self, tid: str) -> Reconstruction | None:
-        """The reconstruction of a trial processed here, if done."""
+    def result(self, info: TrialInfo) -> Reconstruction | None:
+        """The reconstruction of a trial processed here, if done and made with the rig
+        the trial would be processed with now (not one replaced since)."""
+        rig = self.rig_for(info)
+        now = _stamp(rig) if rig is not None else None
         with self.lock:
-            return self._results.get(tid)
+            if now is None or self._rig_used.get(info.id) != now:
+                return None
+            return self._results.get(info.id)
 
     def close(self) -> None:
         """Let the worker end after the job under way (it is a daemon thread)."""
@@ -269,6 +283,9 @@ class Processor:
         rig = self.rig_for(info)
         if rig is None:
             raise InputError(f"lab file {self.lab} names no rig")
+        used = _stamp(rig)
+        with self.lock:
+            self._rig_used[info.id] = used
         if processing.is_blob_recording(journal):
             with self.lock:
                 job.path = "identification"
