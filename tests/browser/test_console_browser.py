@@ -109,6 +109,18 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
     b = np.array([p if p else [np.nan] * 3 for p in second["points"]], dtype=float)
     assert np.nanmax(np.abs(a - b)) > 1.0  # mm
     assert page.locator("#views2d canvas").count() >= 4  # 2 SELSPOT + 2 hub cameras
+    # a marker over time: x, y, z of the chosen one drawn from the last seconds
+    page.wait_for_function("document.getElementById('series-marker').options.length === 8")
+    page.select_option("#series-marker", "2")
+    page.wait_for_function("window.spotlab.series.length > 20")
+    blank = page.evaluate("(() => { const c = document.createElement('canvas'); c.width = 520; "
+                          "c.height = 180; return c.toDataURL(); })()")  # fmt: skip
+    assert page.evaluate("document.getElementById('series').toDataURL()") != blank
+    # link health: one strip per device, per-second counts
+    page.wait_for_function(
+        "document.querySelectorAll('#health canvas').length === 3", timeout=10_000
+    )
+    assert "lost" in page.inner_text("#health div[data-device='selspot']")
     _shot(page, "1-devices-and-views")
     # record a 5 s trial from the page
     page.fill("#trial", "walk5s")
@@ -144,7 +156,29 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
     )  # fmt: skip
     sidecar = json.loads((data / "S01" / "session1" / "walk5s.json").read_text())
     assert sidecar["notes"] == "from the browser test" and 4.9 <= sidecar["duration_s"] <= 6.0
-    shutil.copy(ARTIFACTS / "4-exported.png", ARTIFACTS / "console.png")
+    # process it from the list: progress, then the quality numbers; export the result
+    row.locator("button.process").click()
+    page.wait_for_function(
+        "document.getElementById('process-stage').textContent.startsWith('done')", timeout=30_000
+    )
+    frames = page.inner_text("#process-quality tr[data-key='frames'] td")
+    assert int(frames) == trial.points.shape[0], frames
+    share = page.inner_text("#process-quality tr[data-key='reconstructed_fraction'] td")
+    assert float(share.rstrip(" %")) > 90, share
+    assert page.locator("#process-quality tr[data-key='rms_ray_px']").count() == 1
+    assert page.locator("#process-quality tr[data-key='gaps']").count() == 1
+    assert page.evaluate("document.getElementById('process-progress').value") == 1
+    page.click("#process-trc")
+    page.wait_for_function(
+        "document.getElementById('process-msg').textContent.includes('.trc')", timeout=30_000
+    )
+    assert (data / "S01" / "session1" / "walk5s.trc").is_file()
+    page.wait_for_function(
+        "document.querySelector(\"#trials tr[data-trial='S01.session1.walk5s']\")"
+        ".textContent.includes('RMS')", timeout=10_000,
+    )  # fmt: skip
+    _shot(page, "4b-processed")
+    shutil.copy(ARTIFACTS / "4b-processed.png", ARTIFACTS / "console.png")
     page.close()
 
 
@@ -199,3 +233,48 @@ def test_a_missing_port_is_shown_in_the_page(browser: Any, tmp_path: Path) -> No
         code = proc.wait(timeout=20)
     assert code == 0
     assert f"spotlab: warning: device sync: port {missing} does not exist" in err.read_text()
+
+
+@pytest.mark.long
+def test_the_calibration_wizard_in_the_page(sim_console: tuple[str, Path], browser: Any) -> None:
+    url, data = sim_console
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    page.goto(url)
+    page.wait_for_function("window.spotlab.calibration && window.spotlab.messages > 0")
+    # first, a device reconnected from the page: the preview starts again and it comes back
+    page.select_option("#device-name", "timer")
+    assert page.is_disabled("#device-set-rate") is False
+    page.click("#device-reconnect")
+    page.wait_for_function(
+        "document.getElementById('device-msg').textContent.includes('reconnect asked')"
+    )
+    page.wait_for_function(
+        "document.querySelectorAll('#devices td.ok').length === 3", timeout=20_000
+    )
+    page.fill("#cal-session", "wizard")
+    page.fill("#cal-wand-seconds", "8")
+    page.click("#cal-wand")
+    # the coverage of each camera shows and grows while the wand is waved
+    page.wait_for_function(
+        "document.querySelectorAll('#cal-coverage tbody tr').length === 4", timeout=15_000
+    )
+    _shot(page, "6-wand-dance")
+    page.wait_for_function("!document.getElementById('cal-lframe').disabled", timeout=30_000)
+    cover = page.evaluate("window.spotlab.calibration.coverage")
+    assert min(cover.values()) > 0.1, cover
+    page.click("#cal-lframe")
+    page.wait_for_function("!document.getElementById('cal-run').disabled", timeout=30_000)
+    page.click("#cal-run")
+    page.wait_for_function("!document.getElementById('cal-accept').disabled", timeout=120_000)
+    page.wait_for_function(
+        "document.getElementById('cal-figure').complete && "
+        "document.getElementById('cal-figure').naturalWidth > 0"
+    )
+    rms = page.inner_text("#cal-coverage tr[data-camera='cam1'] td:nth-child(3)")
+    assert float(rms.split()[0]) < 1, rms
+    assert page.inner_text("#cal-verdict").startswith("verdict: ")
+    page.click("#cal-accept")
+    page.wait_for_function("window.spotlab.calibration.step === 'accepted'")
+    assert (data / "S01" / "wizard" / "rig.toml").is_file()
+    _shot(page, "7-calibrated")
+    page.close()

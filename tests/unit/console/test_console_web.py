@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from spotlab.console.cli import main
@@ -65,6 +66,34 @@ def test_store_keeps_trials_inside_the_data_folder(tmp_path: Path) -> None:
     assert [t.id for t in store.all()] == ["S01.walk.t1"]
     with pytest.raises(InputError, match="no trial"):
         store.load("S01.walk.t2")
+
+
+def test_link_health_counts_per_second_and_restarts_with_a_session() -> None:
+    from spotlab.console.web.link_health import LinkHealth
+
+    rows = [{"name": "a", "frames": 0, "lost_frames": 0, "crc_errors": 0}]
+    health = LinkHealth(lambda: [dict(r) for r in rows])
+    for t, (frames, lost, crc) in enumerate([(0, 0, 0), (100, 1, 0), (200, 1, 2), (50, 0, 0)]):
+        rows[0].update(frames=frames, lost_frames=lost, crc_errors=crc)
+        health.sample(now=float(t))
+    got = health.snapshot()["devices"]["a"]
+    # the first read is the baseline; a counter that went down is a new session's
+    assert got == {
+        "t": [1.0, 2.0, 3.0],
+        "frames": [100, 100, 50],
+        "lost": [1, 0, 0],
+        "crc": [0, 2, 0],
+    }
+
+
+def test_gap_counts_of_trajectories() -> None:
+    from spotlab.console.web.processing_jobs import gap_counts
+
+    nan = np.nan
+    x = np.array([[1, nan, 1], [nan, nan, 1], [nan, nan, nan], [1, nan, 1], [nan, nan, 1]])
+    points = np.repeat(x[:, :, None], 3, axis=2)  # (F=5, M=3, 3)
+    # marker 0: one gap of 2 frames (the trailing miss is not a gap); marker 2: one of 1
+    assert gap_counts(points) == {"gaps": 2, "longest_gap_frames": 2, "markers_never_seen": 1}
 
 
 # ---- a real console process ------------------------------------------------------------
@@ -154,6 +183,13 @@ def test_sim_console_api_records_and_exports(
         return devices if all(d["connected"] and d["frames"] > 0 for d in devices) else None
 
     devices = c.until(connected)
+    # link health: per-second increases of each device's counters
+    health = c.until(
+        lambda: (h := c.call("/api/health")[1])["devices"].get("selspot", {}).get("t", [])[1:] and h
+    )
+    assert set(health["devices"]) <= {"selspot", "centroid", "timer"} and health["window_s"] == 60
+    assert all(v >= 0 for d in health["devices"].values() for k in ("lost", "crc") for v in d[k])
+    assert max(health["devices"]["selspot"]["frames"]) > 0, health
     latency = c.until(lambda: c.call("/api/status")[1]["live_latency"])
     assert latency["frames"] > 0 and latency["p50_us"] > 0, latency
     assert {d["family"] for d in devices} == {"selspot", "centroid", "timer"}
@@ -185,6 +221,24 @@ def test_sim_console_api_records_and_exports(
     assert c.call("/api/trials/S01..t1/export", {"format": "c3d"})[0] == 400
     assert c.call("/api/trials/S01.walk.t9/export", {"format": "c3d"})[0] == 404
     assert c.call("/api/trials/stop", {})[0] == 409
+    # "Process": in a worker thread, progress and the quality numbers through the API
+    assert c.call("/api/trials/S01.walk.t1/process")[0] == 404  # not processed yet
+    assert c.call("/api/trials/S01.walk.t9/process", {})[0] == 404
+    code, job = c.call("/api/trials/S01.walk.t1/process", {})
+    assert code == 202 and job["trial"] == "S01.walk.t1" and job["state"] in ("running", "done")
+    job = c.until(
+        lambda: (j := c.call("/api/trials/S01.walk.t1/process")[1])["state"] != "running" and j
+    )
+    assert job["state"] == "done" and job["path"] == "triangulation", job
+    q = job["quality"]
+    assert q["frames"] > 100 and q["markers"] == 8 and 0.5 < q["reconstructed_fraction"] <= 1, q
+    assert 0 < q["rms_ray_px"] < 50 and {"gaps", "longest_gap_frames"} <= set(q), q
+    assert job["fraction"] == 1.0 and job["elapsed_s"] > 0
+    side = json.loads((data / "S01" / "walk" / "t1.json").read_text())
+    assert side["processing"]["quality"] == q and side["processing"]["path"] == "triangulation"
+    code, result = c.call("/api/trials/S01.walk.t1/export", {"format": "c3d"})
+    assert code == 200 and result["processed"] and result["frames"] == q["frames"], result
+
     # a second console on the same port: one error line, non-zero
     port = c.base.rsplit(":", 1)[1]
     second = subprocess.run(
@@ -207,6 +261,38 @@ def test_sim_console_api_records_and_exports(
     last = json.loads((data / "S01" / "walk" / "t3.json").read_text())
     assert last["state"] == "done" and min(last["frames"].values()) > 0, last
     assert last["messages"] == ["stopped when the console was stopped"], last
+
+
+@pytest.mark.long
+def test_a_device_rate_set_and_a_reconnect_from_the_api(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    c = console("--sim", "--data", str(tmp_path / "data"))
+
+    # a rate set from the page and a reconnect (the preview starts again)
+    def selspot() -> dict[str, Any]:
+        rows = c.call("/api/devices")[1]["devices"]
+        row: dict[str, Any] = next(d for d in rows if d["name"] == "selspot")
+        return row
+
+    assert c.call("/api/devices/nope/reconnect", {})[0] == 404
+    assert c.call("/api/devices/selspot/configure", {"rate_hz": -1})[0] == 400
+    assert c.call("/api/devices/selspot/configure", {"rate_hz": "x"})[0] == 400
+    code, body = c.call("/api/devices/selspot/configure", {"rate_hz": 50})
+    assert code == 200 and body == {"device": "selspot", "rate_hz": 50.0, "restarting": True}
+    row = c.until(lambda: (r := selspot())["rate_hz"] == 50.0 and r["frames"] > 100 and r)
+    assert row["connected"] and row["rate_settable"], row
+    before = selspot()["frames"]
+    assert c.call("/api/devices/timer/reconnect", {})[0] == 202
+    # new driver objects count from zero: seen below the count before, then connected
+    c.until(lambda: selspot()["frames"] < before)
+    c.until(lambda: selspot()["connected"])
+    # refused while a trial is recorded
+    assert c.call("/api/trials/start", {"subject": "S", "session": "s", "trial": "t"})[0] == 201
+    c.until(lambda: c.call("/api/status")[1]["mode"] == "recording")
+    assert c.call("/api/devices/selspot/reconnect", {})[0] == 409
+    assert c.call("/api/devices/selspot/configure", {"rate_hz": 60})[0] == 409
+    assert c.call("/api/trials/stop", {})[0] == 200
 
 
 def test_missing_port_device_drop_and_token(
@@ -291,3 +377,49 @@ def test_a_trial_whose_devices_cannot_start_fails_and_leaves_no_journal(tmp_path
     assert warned == [f"device timer: port {tmp_path / 'gone'} does not exist"]
     with pytest.raises(InputError, match="exists"):
         acq.start_trial(TrialInfo("S", "s", "t"))
+
+
+@pytest.mark.long
+def test_the_calibration_wizard_on_the_simulated_hub(
+    console: Callable[..., Console], tmp_path: Path
+) -> None:
+    data = tmp_path / "data"
+    c = console("--sim", "--data", str(data))
+    assert c.call("/api/calibration")[1]["step"] == "idle"
+    assert c.call("/api/calibration/run", {})[0] == 400
+    assert c.call("/api/calibration/lframe", {"seconds": 1})[0] == 400
+    assert c.call("/api/calibration/figure")[0] == 404
+    body = {"subject": "S01", "session": "cal", "seconds": 8}
+    code, state = c.call("/api/calibration/wand", body)
+    assert code == 202 and state["step"] == "wand", state
+    assert c.call("/api/calibration/wand", body)[0] == 409  # busy
+    # the live coverage grows while the wand is waved
+    first = c.until(lambda: (s := c.call("/api/calibration")[1])["coverage"] and s)["coverage"]
+    state = c.until(lambda: (s := c.call("/api/calibration")[1])["step"] != "wand" and s, 30)
+    assert state["step"] == "wand_done", state
+    assert set(state["coverage"]) == {"cam1", "cam2", "cam3", "cam4"}
+    assert all(state["coverage"][k] >= first.get(k, 0) for k in state["coverage"])
+    assert min(state["coverage"].values()) > 0.1, state
+    assert c.call("/api/calibration/lframe", {"seconds": 2})[0] == 202
+    state = c.until(lambda: (s := c.call("/api/calibration")[1])["step"] != "lframe" and s, 20)
+    assert state["step"] == "lframe_done", state
+    assert c.call("/api/calibration/run", {})[0] == 202
+    state = c.until(lambda: (s := c.call("/api/calibration")[1])["step"] != "calibrating" and s, 90)
+    assert state["step"] == "calibrated", state
+    report = state["report"]
+    assert [cam["name"] for cam in report["cameras"]] == ["cam1", "cam2", "cam3", "cam4"]
+    assert all(0 < cam["reprojection_rms"] < 1 for cam in report["cameras"]), report
+    with urllib.request.urlopen(c.base + "/api/calibration/figure", timeout=10) as response:
+        assert response.headers["content-type"] == "image/png"
+        assert response.read(8) == b"\x89PNG\r\n\x1a\n"
+    # the lab's devices are back
+    c.until(
+        lambda: (
+            {d["name"] for d in c.call("/api/devices")[1]["devices"]}
+            == {"selspot", "centroid", "timer"}
+        )
+    )
+    code, state = c.call("/api/calibration/accept", {})
+    assert code == 200 and state["step"] == "accepted" and state["rig"] == "S01/cal/rig.toml"
+    assert (data / "S01" / "cal" / "rig.toml").is_file()
+    assert (data / "S01" / "cal" / "rig.candidate.report.png").is_file()

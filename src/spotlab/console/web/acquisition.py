@@ -28,6 +28,7 @@ from spotlab.acquisition.live import LivePipeline
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
 from spotlab.acquisition.summary import summarize
+from spotlab.console.device_settings import FAMILY_SETTINGS
 from spotlab.console.web.lab_setup import LabPlan
 from spotlab.console.web.live_view import MarkerSlot, ViewSink
 from spotlab.console.web.trials import TrialInfo, TrialStore
@@ -123,6 +124,17 @@ class Acquisition:
         self._wake.set()
         return info
 
+    def restart(self, plan: LabPlan | None = None) -> None:
+        """Start the preview again with new driver objects (every device reconnects,
+        start-up dialogue included), of ``plan`` when given. InputError while a trial is
+        being recorded."""
+        with self._lock:
+            if self._wanted is not None or self._active is not None:
+                raise InputError("a trial is being recorded: stop it first")
+            if plan is not None:
+                self.plan = plan
+        self._wake.set()
+
     def stop_trial(self, timeout: float = 20.0) -> TrialInfo:
         """Stop the trial being recorded and wait until its sidecar is final."""
         with self._lock:
@@ -173,6 +185,7 @@ class Acquisition:
                     "crc_errors": stats["crc_errors"],
                     "resyncs": stats["resyncs"],
                     "reconnects": stats["reconnects"],
+                    "rate_settable": "rate" in FAMILY_SETTINGS.get(driver.family, {}),
                     "clock_offset_s": None if clock is None else round(clock.offset_s, 6),
                     "clock_drift_ppm": (
                         None

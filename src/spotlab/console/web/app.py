@@ -24,7 +24,11 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from spotlab import __version__
 from spotlab.console.web.acquisition import Acquisition
+from spotlab.console.web.calibration_wizard import CalibrationWizard
 from spotlab.console.web.export import export_trial
+from spotlab.console.web.lab_setup import with_rate
+from spotlab.console.web.link_health import LinkHealth
+from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo
 from spotlab.processing.errors import InputError
 
@@ -39,8 +43,19 @@ def _error(status: int, message: str) -> JSONResponse:
     return JSONResponse({"error": message}, status_code=status)
 
 
-def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
-    """The Starlette app of a running :class:`Acquisition`."""
+def make_app(
+    acq: Acquisition, token: str | None = None, processor: Processor | None = None
+) -> Starlette:
+    """The Starlette app of a running :class:`Acquisition`.
+
+    ``processor`` processes trials for ``/api/trials/{id}/process`` (default: one of the
+    acquisition's data folder and lab).
+    """
+    lab = acq.plan.lab
+    jobs = processor or Processor(acq.store, lab.rig, lab.model, lab.path)
+    health = LinkHealth(acq.devices)
+    health.start()
+    wizard = CalibrationWizard(acq, jobs)
 
     def allowed(given: str | None) -> bool:
         return token is None or (given is not None and hmac.compare_digest(given, token))
@@ -66,6 +81,59 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
 
     async def devices(request: Request) -> Response:
         return await guard(request) or JSONResponse({"devices": acq.devices()})
+
+    async def reconnect(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        name = request.path_params["name"]
+        if name not in acq.plan.names():
+            return _error(404, f"no device {name!r} in the lab")
+        try:
+            acq.restart()
+        except InputError as exc:
+            return _error(409, str(exc))
+        return JSONResponse({"device": name, "restarting": True}, status_code=202)
+
+    async def configure(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        name = request.path_params["name"]
+        if name not in acq.plan.names():
+            return _error(404, f"no device {name!r} in the lab")
+        try:
+            raw = await body(request)
+            acq.restart(with_rate(acq.plan, name, raw.get("rate_hz")))
+        except InputError as exc:
+            return _error(409 if "being recorded" in str(exc) else 400, str(exc))
+        return JSONResponse({"device": name, "rate_hz": float(raw["rate_hz"]), "restarting": True})
+
+    async def calibration(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        step = request.path_params.get("step")
+        if request.url.path.endswith("/figure"):
+            try:
+                return FileResponse(wizard.figure(), media_type="image/png")
+            except InputError as exc:
+                return _error(404, str(exc))
+        if step is None:
+            return JSONResponse(wizard.snapshot())
+        try:
+            raw = await body(request)
+            if step in ("wand", "lframe"):
+                wizard.record(step, raw.get("subject"), raw.get("session"), raw.get("seconds"))
+            elif step == "run":
+                wizard.calibrate()
+            elif step == "accept":
+                wizard.accept()
+            else:
+                return _error(404, f"no calibration step {step!r}")
+        except InputError as exc:
+            return _error(409 if "busy" in str(exc) or "being" in str(exc) else 400, str(exc))
+        return JSONResponse(wizard.snapshot(), status_code=202 if step != "accept" else 200)
+
+    async def link_health(request: Request) -> Response:
+        return await guard(request) or JSONResponse(health.snapshot())
 
     async def trials(request: Request) -> Response:
         return await guard(request) or JSONResponse(
@@ -122,16 +190,39 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
             info = acq.store.load(request.path_params["tid"])
         except InputError as exc:
             return _error(404 if str(exc).startswith("no trial") else 400, str(exc))
-        lab = acq.plan.lab
         try:
             result = await asyncio.to_thread(
-                export_trial, acq.store, info, raw.get("format", "c3d"), lab.rig, lab.path
+                export_trial,
+                acq.store,
+                info,
+                raw.get("format", "c3d"),
+                jobs.rig_for(info),
+                lab.path,
+                jobs.result(info),
             )
         except InputError as exc:
             return _error(409 if "being recorded" in str(exc) else 400, str(exc))
         except Exception as exc:  # a numerics error, told to the page
             return _error(422, f"export failed: {exc}")
         return JSONResponse(result)
+
+    async def process(request: Request) -> Response:
+        if (denied := await guard(request)) is not None:
+            return denied
+        try:
+            info = acq.store.load(request.path_params["tid"])
+        except InputError as exc:
+            return _error(404 if str(exc).startswith("no trial") else 400, str(exc))
+        if request.method == "GET":
+            job = jobs.job(info.id)
+            if job is None:
+                return _error(404, f"trial {info.id} was not processed by this console")
+            return JSONResponse(job)
+        try:
+            jobs.submit(info)
+        except InputError as exc:
+            return _error(409 if "being" in str(exc) else 400, str(exc))
+        return JSONResponse(jobs.job(info.id), status_code=202)
 
     async def live(ws: WebSocket) -> None:
         if not allowed(token_of(ws)):
@@ -164,11 +255,21 @@ def make_app(acq: Acquisition, token: str | None = None) -> Starlette:
         Route("/", index),
         Route("/api/status", status),
         Route("/api/devices", devices),
+        Route("/api/devices/{name}/reconnect", reconnect, methods=["POST"]),
+        Route("/api/devices/{name}/configure", configure, methods=["POST"]),
+        Route("/api/health", link_health),
+        Route("/api/calibration", calibration),
+        Route("/api/calibration/figure", calibration),
+        Route("/api/calibration/{step}", calibration, methods=["POST"]),
         Route("/api/trials", trials),
         Route("/api/trials/start", start, methods=["POST"]),
         Route("/api/trials/stop", stop, methods=["POST"]),
         Route("/api/trials/{tid}/export", export, methods=["POST"]),
+        Route("/api/trials/{tid}/process", process, methods=["GET", "POST"]),
         WebSocketRoute("/api/live", live),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
-    return Starlette(routes=routes)
+    app = Starlette(routes=routes)
+    # what the server ends after serving: the health sampler, the processing worker
+    app.state.closers = [health.close, jobs.close]
+    return app

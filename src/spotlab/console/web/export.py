@@ -17,6 +17,7 @@ from typing import Any
 from spotlab import processing
 from spotlab.console.web.trials import TrialInfo, TrialStore
 from spotlab.processing.errors import InputError
+from spotlab.processing.trajectories import Reconstruction
 
 __all__ = ["FORMATS", "export_trial"]
 
@@ -24,7 +25,12 @@ FORMATS = ("c3d", "trc")
 
 
 def export_trial(
-    store: TrialStore, info: TrialInfo, fmt: object, rig: Path | None, lab: Path
+    store: TrialStore,
+    info: TrialInfo,
+    fmt: object,
+    rig: Path | None,
+    lab: Path,
+    processed: Reconstruction | None = None,
 ) -> dict[str, Any]:
     """Write ``DATA/SUBJECT/SESSION/TRIAL.<fmt>``; what was written (JSON-safe).
 
@@ -40,22 +46,29 @@ def export_trial(
         The lab's rig.
     lab : Path
         The lab file (named in the error when it has no rig).
+    processed : Reconstruction, optional
+        The trial's result of "Process" (:mod:`.processing_jobs`), written as it is;
+        without it the trial is reconstructed here.
 
     Returns
     -------
     dict
         ``file`` (path in the data folder), ``frames``, ``markers``,
-        ``reconstructed_fraction``, ``notes``.
+        ``reconstructed_fraction`` (or the ``labelled_fraction`` of an identified
+        trial), ``notes``, ``processed`` (whether the result of "Process" was written).
     """
     if fmt not in FORMATS:
         raise InputError(f"format {fmt!r} is not one of {', '.join(FORMATS)}")
     if info.state == "recording":
         raise InputError(f"trial {info.id} is being recorded: stop it first")
-    if rig is None:
-        raise InputError(f"lab file {lab} names no rig: a trial is exported with one")
     journal = store.journal(info.subject, info.session, info.trial)
     out = journal.with_suffix(f".{fmt}")
-    result = processing.reconstruct_recording(journal, rig)
+    if processed is not None:
+        result = processed
+    elif rig is not None:
+        result = processing.reconstruct_recording(journal, rig)
+    else:
+        raise InputError(f"lab file {lab} names no rig: a trial is exported with one")
     processing.write_trial(out, result.trial)
     points = result.trial.points
     rel = str(out.relative_to(store.root))
@@ -66,6 +79,11 @@ def export_trial(
         "file": rel,
         "frames": int(points.shape[0]),
         "markers": int(points.shape[1]),
-        "reconstructed_fraction": float(result.summary.get("reconstructed_fraction", 0.0)),
+        "reconstructed_fraction": float(
+            result.summary.get(
+                "reconstructed_fraction", result.summary.get("labelled_fraction", 0.0)
+            )
+        ),
         "notes": list(result.notes),
+        "processed": processed is not None,
     }

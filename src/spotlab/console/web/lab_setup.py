@@ -10,17 +10,19 @@ the simulators (pyserial loads their ``sim://`` handler by name).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import serial
 
-from spotlab.console.device_settings import requests_from_lab
+from spotlab.console.device_settings import FAMILY_SETTINGS, requests_from_lab
+from spotlab.console.errors import CommandError
 from spotlab.drivers import Driver, load_driver
 from spotlab.io.lab_file import Lab, load_lab
 from spotlab.processing.errors import InputError
 
-__all__ = ["LabPlan", "plan_lab", "sim_lab_file"]
+__all__ = ["LabPlan", "plan_lab", "sim_lab_file", "with_rate"]
 
 #: Rate of every simulated device, Hz.
 SIM_RATE_HZ = 100
@@ -43,24 +45,61 @@ class LabPlan:
     lab: Lab
     simulated: bool
 
-    def drivers(self) -> list[Driver]:
-        """New driver objects for every device of the lab (not started)."""
-        drivers: list[Driver] = []
-        counts: dict[str, int] = {}
+    def names(self) -> list[str]:
+        """The stream name of each device of the lab, in the file's order: its ``name``,
+        else its family (numbered from 0 when the family has several devices)."""
         requests = requests_from_lab(self.lab.devices, {})
+        counts: dict[str, int] = {}
         for r in requests:
             counts[r.family] = counts.get(r.family, 0) + 1
         seen: dict[str, int] = {}
+        names = []
         for r in requests:
             n = seen.get(r.family, 0)
             seen[r.family] = n + 1
             default = r.family if counts[r.family] == 1 else f"{r.family}{n}"
-            drivers.append(load_driver(r.family)(r.port, name=r.name or default, **r.options))
+            names.append(r.name or default)
+        return names
+
+    def drivers(self) -> list[Driver]:
+        """New driver objects for every device of the lab (not started)."""
+        drivers: list[Driver] = [
+            load_driver(r.family)(r.port, name=name, **r.options)
+            for r, name in zip(requests_from_lab(self.lab.devices, {}), self.names(), strict=True)
+        ]
         names = [d.name for d in drivers]
         twice = sorted({n for n in names if names.count(n) > 1})
         if twice:
             raise InputError(f"stream name {twice[0]!r} is given to several devices")
         return drivers
+
+
+def with_rate(plan: LabPlan, name: str, rate_hz: object) -> LabPlan:
+    """``plan`` with device ``name`` set to ``rate_hz`` (Hz) (the lab file is not changed).
+
+    Raises
+    ------
+    InputError
+        For no such device, a family without a rate setting, or a rate that is not a
+        positive number.
+    """
+    names = plan.names()
+    if name not in names:
+        raise InputError(f"no device {name!r} in the lab (it has {', '.join(names)})")
+    index = names.index(name)
+    device = plan.lab.devices[index]
+    if "rate" not in FAMILY_SETTINGS.get(device.family, {}):
+        raise InputError(f"a {device.family} device's rate is not set by the console")
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, int | float) or not rate_hz > 0:
+        raise InputError(f"rate_hz must be a positive number, got {rate_hz!r}")
+    changed = dataclasses.replace(device, settings={**device.settings, "rate": float(rate_hz)})
+    devices = (*plan.lab.devices[:index], changed, *plan.lab.devices[index + 1 :])
+    new = LabPlan(dataclasses.replace(plan.lab, devices=devices), plan.simulated)
+    try:
+        requests_from_lab(new.lab.devices, {})
+    except CommandError as exc:
+        raise InputError(str(exc)) from None
+    return new
 
 
 def sim_lab_file(data: Path) -> Path:

@@ -85,15 +85,16 @@ def serve(
     url = f"http://{shown}:{bound}/" + (f"?token={token}" if token else "")
     print(url, flush=True)
     acq.start()
-    config = uvicorn.Config(
-        make_app(acq, token), log_level="warning", access_log=False, lifespan="off"
-    )
+    app = make_app(acq, token)
+    config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
     server = _Server(config)
     if open_browser:
         threading.Timer(0.5, webbrowser.open, (url,)).start()
     try:
         server.run(sockets=[sock])
     finally:
+        for close in app.state.closers:
+            close()
         acq.close()
         sock.close()
     return 0

@@ -72,6 +72,8 @@ class TrialInfo:
         What the operator should know (a device that dropped out, a failed start).
     exports : list of str
         Files exported, relative to the data folder.
+    processing : dict or None
+        The last processing from the page (``path``, ``quality``, ``rig``), if any.
     """
 
     subject: str
@@ -85,6 +87,7 @@ class TrialInfo:
     state: str = "recording"
     messages: list[str] = field(default_factory=list)
     exports: list[str] = field(default_factory=list)
+    processing: dict[str, Any] | None = None
 
     @property
     def id(self) -> str:

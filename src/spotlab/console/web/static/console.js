@@ -49,6 +49,31 @@ function showDevices(devices) {
   }
 }
 
+// The device form (outside the table, which is rebuilt with every message).
+function showDeviceChoices(devices) {
+  const select = document.getElementById("device-name");
+  const names = devices.map((d) => d.name);
+  if (Array.from(select.options).map((o) => o.value).join("\n") !== names.join("\n")) {
+    const chosen = select.value;
+    select.replaceChildren(...names.map((n) => el("option", { value: n }, n)));
+    if (names.includes(chosen)) select.value = chosen;
+  }
+  const d = devices.find((x) => x.name === select.value);
+  document.getElementById("device-set-rate").disabled = recording || !(d && d.rate_settable);
+  document.getElementById("device-reconnect").disabled = recording;
+}
+
+function deviceAction(what, body) {
+  const name = document.getElementById("device-name").value;
+  say("device-msg", name + ": " + what + "…");
+  api("/api/devices/" + encodeURIComponent(name) + "/" + what, { method: "POST", body: JSON.stringify(body) })
+    .then(() => say("device-msg", name + ": " + what + " asked; the devices start again"))
+    .catch((e) => say("device-msg", name + ": " + e.message, true));
+}
+document.getElementById("device-reconnect").addEventListener("click", () => deviceAction("reconnect", {}));
+document.getElementById("device-set-rate").addEventListener("click", () =>
+  deviceAction("configure", { rate_hz: Number(document.getElementById("device-rate").value) }));
+
 function showBanner(status, devices) {
   const lines = [];
   for (const d of devices) if (d.last_error) lines.push(d.name + ": " + d.last_error);
@@ -206,7 +231,7 @@ function refreshTrials() {
       const lost = Object.entries(t.lost).map(([k, v]) => k + " " + v).join(", ");
       for (const text of [t.id, t.started_at.replace("T", " ").slice(0, 19), fmt(t.duration_s, 2),
                           String(sum(t.frames)), lost, t.state + (t.exports.length ? " · " + t.exports.join(", ") : ""),
-                          [t.notes, ...t.messages].filter(Boolean).join(" · ")]) {
+                          [t.notes, ...t.messages].filter(Boolean).join(" · "), processedText(t.processing)]) {
         tr.appendChild(el("td", {}, text));
       }
       const td = el("td");
@@ -214,11 +239,263 @@ function refreshTrials() {
       b.disabled = t.state === "recording" || t.state === "failed";
       b.addEventListener("click", () => exportTrial(t.id, b));
       td.appendChild(b);
+      const pb = el("button", { class: "process", type: "button" }, "Process");
+      pb.disabled = b.disabled;
+      pb.addEventListener("click", () => processTrial(t.id));
+      td.appendChild(pb);
       tr.appendChild(td);
       body.appendChild(tr);
     }
   }).catch((e) => say("trials-msg", e.message, true));
 }
+
+// ---- processing: "Process" reconstructs a recorded trial in the console's worker thread,
+// follows its progress, shows the quality numbers and exports the result ------------
+const QUALITY = [
+  ["frames", "frames", 0], ["markers", "markers", 0], ["cameras", "cameras", 0],
+  ["rate_hz", "rate (Hz)", 1], ["reconstructed_fraction", "reconstructed", "%"],
+  ["labelled_fraction", "labelled", "%"], ["markers_reconstructed", "markers seen", 0],
+  ["rms_ray_px", "RMS ray residual (px)", 3], ["gaps", "gaps", 0],
+  ["longest_gap_frames", "longest gap (frames)", 0], ["markers_never_seen", "markers never seen", 0],
+  ["lost_frames", "lost frames", 0], ["ghosts_rejected", "ghosts rejected", 0],
+];
+
+function qualityValue(v, how) {
+  if (v === null || v === undefined) return "—";
+  return how === "%" ? (100 * v).toFixed(2) + " %" : fmt(v, typeof v === "number" && !Number.isInteger(v) ? how : undefined);
+}
+
+// The trials table's "processed" cell: the last processing's headline numbers.
+function processedText(p) {
+  if (!p || !p.quality) return "";
+  const q = p.quality;
+  const share = q.reconstructed_fraction ?? q.labelled_fraction;
+  return qualityValue(share, "%") + " · RMS " + qualityValue(q.rms_ray_px, 2) + " · " + q.gaps + " gaps";
+}
+
+let processing = null; // id of the trial shown in the panel
+let processTimer = null;
+
+function showJob(job) {
+  document.getElementById("process-trial").textContent = job.trial + " (" + (job.path || "…") + ")";
+  const bar = document.getElementById("process-progress");
+  bar.value = job.state === "done" ? 1 : job.fraction;
+  const stage = job.state === "running"
+    ? (job.stage || "starting") + " " + (job.detail || "") : job.state + " in " + fmt(job.elapsed_s, 1) + " s";
+  say("process-stage", stage, job.state === "failed");
+  const body = document.querySelector("#process-quality tbody");
+  body.replaceChildren();
+  const q = job.quality || {};
+  for (const [key, label, how] of QUALITY) {
+    if (!(key in q)) continue;
+    const tr = el("tr", { "data-key": key });
+    tr.appendChild(el("th", {}, label));
+    tr.appendChild(el("td", {}, qualityValue(q[key], how)));
+    body.appendChild(tr);
+  }
+  for (const [cam, rms] of Object.entries(q.rms_ray_px_per_camera || {})) {
+    const tr = el("tr", { "data-key": "rms:" + cam });
+    tr.appendChild(el("th", {}, "RMS ray residual (px) " + cam));
+    tr.appendChild(el("td", {}, fmt(rms, 3)));
+    body.appendChild(tr);
+  }
+  const notes = document.getElementById("process-notes");
+  notes.replaceChildren(...[job.error, ...job.notes].filter(Boolean).map((n) => el("li", {}, n)));
+  document.getElementById("process-actions").hidden = job.state !== "done";
+}
+
+function pollJob(id) {
+  clearTimeout(processTimer);
+  api("/api/trials/" + encodeURIComponent(id) + "/process").then((job) => {
+    if (processing !== id) return;
+    showJob(job);
+    if (job.state === "running") processTimer = setTimeout(() => pollJob(id), 250);
+    else refreshTrials();
+  }).catch((e) => say("process-msg", e.message, true));
+}
+
+function processTrial(id) {
+  processing = id;
+  document.getElementById("process-panel").hidden = false;
+  say("process-msg", "");
+  api("/api/trials/" + encodeURIComponent(id) + "/process", { method: "POST", body: "{}" })
+    .then((job) => { showJob(job); pollJob(id); })
+    .catch((e) => say("process-msg", id + ": " + e.message, true));
+}
+
+for (const format of ["c3d", "trc"]) {
+  const button = document.getElementById("process-" + format);
+  button.addEventListener("click", () => {
+    button.disabled = true;
+    api("/api/trials/" + encodeURIComponent(processing) + "/export", { method: "POST", body: JSON.stringify({ format }) })
+      .then((r) => { say("process-msg", processing + " → " + r.file + " (" + r.frames + " frames, " + r.markers + " markers)"); refreshTrials(); })
+      .catch((e) => say("process-msg", e.message, true))
+      .finally(() => { button.disabled = false; });
+  });
+}
+
+// ---- a marker over time (client side, from the live messages) ----------------------
+const SERIES_S = 5;
+const series = []; // [time_s, points] of the last SERIES_S seconds
+received.series = series;
+
+function keepSeries(markers) {
+  if (!markers || markers.time_s === null || markers.time_s === undefined) return;
+  const last = series[series.length - 1];
+  if (last && markers.time_s < last[0]) series.length = 0; // a new session: time restarts
+  if (last && markers.time_s === last[0]) return;
+  series.push([markers.time_s, markers.points]);
+  while (series.length && series[0][0] < markers.time_s - SERIES_S) series.shift();
+  const select = document.getElementById("series-marker");
+  const labels = markers.labels || [];
+  if (select.options.length !== labels.length) {
+    const chosen = select.value;
+    select.replaceChildren(...labels.map((l, i) => el("option", { value: String(i) }, l || "m" + i)));
+    if (chosen && Number(chosen) < labels.length) select.value = chosen;
+  }
+}
+
+function showSeries() {
+  const canvas = document.getElementById("series");
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  const m = Number(document.getElementById("series-marker").value || 0);
+  if (series.length < 2) return;
+  const t1 = series[series.length - 1][0];
+  const colours = ["#ef5350", "#66bb6a", "#42a5f5"];
+  for (let axis = 0; axis < 3; axis++) {
+    const values = series.map(([t, pts]) => [t, pts[m] ? pts[m][axis] : null]);
+    const seen = values.filter(([, v]) => v !== null).map(([, v]) => v);
+    if (!seen.length) continue;
+    const lo = Math.min(...seen), hi = Math.max(...seen), span = Math.max(hi - lo, 1);
+    const band = canvas.height / 3;
+    g.strokeStyle = colours[axis];
+    g.beginPath();
+    let pen = false;
+    for (const [t, v] of values) {
+      if (v === null) { pen = false; continue; }
+      const x = canvas.width * (1 - (t1 - t) / SERIES_S);
+      const y = band * axis + band - 4 - (band - 8) * (v - lo) / span;
+      if (pen) g.lineTo(x, y); else g.moveTo(x, y);
+      pen = true;
+    }
+    g.stroke();
+    g.fillStyle = colours[axis];
+    g.fillText(fmt(seen[seen.length - 1], 1) + " mm", 4, band * axis + 12);
+  }
+}
+
+// ---- link health over time (GET /api/health once a second) ----------------------------
+function drawHealth(canvas, d) {
+  const g = canvas.getContext("2d");
+  g.clearRect(0, 0, canvas.width, canvas.height);
+  const n = 60, w = canvas.width / n, h = canvas.height;
+  const fps = Math.max(1, ...d.frames);
+  const offset = n - d.t.length;
+  g.strokeStyle = "#90a4ae";
+  g.beginPath();
+  d.frames.forEach((f, i) => { const x = (offset + i + 0.5) * w, y = h - 2 - (h - 4) * f / fps; if (i) g.lineTo(x, y); else g.moveTo(x, y); });
+  g.stroke();
+  const worst = Math.max(1, ...d.lost, ...d.crc);
+  d.t.forEach((_, i) => {
+    const x = (offset + i) * w;
+    if (d.lost[i] > 0) { g.fillStyle = "#ef5350"; const bh = Math.max(2, (h / 2) * d.lost[i] / worst); g.fillRect(x, h - bh, w / 2, bh); }
+    if (d.crc[i] > 0) { g.fillStyle = "#ffa726"; const bh = Math.max(2, (h / 2) * d.crc[i] / worst); g.fillRect(x + w / 2, h - bh, w / 2, bh); }
+  });
+}
+
+function refreshHealth() {
+  api("/api/health").then((health) => {
+    received.health = health;
+    const box = document.getElementById("health");
+    for (const [name, d] of Object.entries(health.devices)) {
+      let canvas = box.querySelector("canvas[data-device='" + CSS.escape(name) + "']");
+      let label = box.querySelector("div[data-device='" + CSS.escape(name) + "'] span");
+      if (!canvas) {
+        const div = el("div", { class: "dev", "data-device": name });
+        label = el("span");
+        canvas = el("canvas", { width: "480", height: "40", "data-device": name });
+        div.append(label, canvas);
+        box.appendChild(div);
+      }
+      const sumOf = (a) => a.reduce((x, y) => x + y, 0);
+      label.textContent = name + ": " + sumOf(d.lost) + " lost, " + sumOf(d.crc) + " CRC errors in " + d.t.length + " s · "
+        + fmt(d.t.length > 1 ? d.frames[d.t.length - 1] / (d.t[d.t.length - 1] - d.t[d.t.length - 2]) : null, 0) + " frames/s";
+      drawHealth(canvas, d);
+    }
+  }).catch(() => {});
+}
+
+// ---- calibration wizard (GET /api/calibration, POST .../wand, lframe, run, accept) ----
+let calTimer = null;
+const CAL_WORDS = {
+  idle: "not started", wand: "recording the wand dance: wave it through the volume",
+  wand_done: "wand dance recorded", lframe: "recording the L-frame: leave it still on the floor",
+  lframe_done: "L-frame recorded", calibrating: "calibrating…", calibrated: "calibrated: check the report, then accept",
+  accepted: "accepted", failed: "failed",
+};
+
+function showCalibration(c) {
+  received.calibration = c;
+  const busy = ["wand", "lframe", "calibrating"].includes(c.step);
+  let text = CAL_WORDS[c.step] || c.step;
+  if (c.step === "accepted") text += ": " + c.rig + " is the rig of session " + c.subject + "/" + c.session;
+  if (c.error) text += ": " + c.error;
+  say("cal-step", text, c.step === "failed");
+  document.getElementById("cal-wand").disabled = busy;
+  document.getElementById("cal-lframe").disabled = busy || !["wand_done", "lframe_done", "failed"].includes(c.step) || !c.wand_trial;
+  document.getElementById("cal-run").disabled = busy || !c.lframe_trial || c.step === "accepted";
+  document.getElementById("cal-accept").disabled = c.step !== "calibrated";
+  const report = c.report || { cameras: [] };
+  const names = Array.from(new Set([...Object.keys(c.coverage || {}), ...report.cameras.map((x) => x.name)]));
+  const body = document.querySelector("#cal-coverage tbody");
+  body.replaceChildren();
+  for (const name of names) {
+    const tr = el("tr", { "data-camera": name });
+    const share = (c.coverage || {})[name];
+    const td = el("td");
+    if (share !== undefined) {
+      const bar = el("span", { class: "bar" });
+      bar.style.width = (100 * share).toFixed(0) + "px";
+      td.append(bar, document.createTextNode((100 * share).toFixed(1) + " %"));
+    }
+    const cam = report.cameras.find((x) => x.name === name);
+    tr.append(el("td", {}, name), td,
+      el("td", {}, cam ? fmt(cam.reprojection_rms, 3) + " " + report.units : ""),
+      el("td", {}, cam ? String(cam.observations) : ""));
+    body.appendChild(tr);
+  }
+  say("cal-verdict", c.report ? "verdict: " + c.report.verdict + ", wand length SD " + fmt(c.report.wand_sd_mm, 3) + " mm"
+    + (c.report.reasons.length ? " · " + c.report.reasons.join(" · ") : "") : "");
+  const img = document.getElementById("cal-figure");
+  const shown = c.step === "calibrated" || c.step === "accepted";
+  if (shown && img.dataset.candidate !== c.candidate) {
+    img.dataset.candidate = c.candidate;
+    img.src = "/api/calibration/figure?t=" + Date.now() + (token ? "&token=" + encodeURIComponent(token) : "");
+  }
+  img.hidden = !shown;
+  clearTimeout(calTimer);
+  if (busy) calTimer = setTimeout(pollCalibration, 300);
+}
+
+function pollCalibration() {
+  api("/api/calibration").then(showCalibration).catch((e) => say("cal-step", e.message, true));
+}
+
+function calibrationStep(step, body) {
+  api("/api/calibration/" + step, { method: "POST", body: JSON.stringify(body || {}) })
+    .then((c) => { showCalibration(c); refreshTrials(); })
+    .catch((e) => say("cal-step", e.message, true));
+}
+document.getElementById("cal-wand").addEventListener("click", () => calibrationStep("wand", {
+  subject: document.getElementById("cal-subject").value, session: document.getElementById("cal-session").value,
+  seconds: Number(document.getElementById("cal-wand-seconds").value),
+}));
+document.getElementById("cal-lframe").addEventListener("click", () => calibrationStep("lframe", {
+  seconds: Number(document.getElementById("cal-lframe-seconds").value),
+}));
+document.getElementById("cal-run").addEventListener("click", () => calibrationStep("run"));
+document.getElementById("cal-accept").addEventListener("click", () => calibrationStep("accept"));
 
 // ---- the live socket ------------------------------------------------------------------
 let lastMode = null;
@@ -240,9 +517,12 @@ function connect() {
     }
     showMode(m.status);
     showDevices(m.devices);
+    showDeviceChoices(m.devices);
     showBanner(m.status, m.devices);
     show2d(m.views);
     show3d(m.markers, m.status.cameras);
+    keepSeries(m.markers);
+    showSeries();
     if (lastMode !== m.status.mode) { lastMode = m.status.mode; refreshTrials(); }
   };
 }
@@ -250,3 +530,6 @@ function connect() {
 refreshTrials();
 connect();
 setInterval(refreshTrials, 3000);
+refreshHealth();
+setInterval(refreshHealth, 1000);
+pollCalibration();
