@@ -3,7 +3,8 @@
 ``spotlab sim coda --pty`` serves the scanner (markers, rate, seed, truth);
 ``spotlab record --device coda=PORT`` records it; ``spotlab info`` decodes the
 journal again; the replayed blocks put every unflagged record in its marker's
-row, at the true position within the precision the scanner's angles give.
+row, at the true position within the precision the scanner's angles give;
+``spotlab reconstruct`` writes its trajectories (C3D) with the stored geometry.
 """
 
 from __future__ import annotations
@@ -67,3 +68,14 @@ def test_record_info_and_replay_of_a_scanner(tmp_path: Path) -> None:
     # and the angle noise at 3 m gives a few mm in depth.
     assert len(err_mm) > 0.9 * 6 * len(seq)
     assert np.median(err_mm) < 5.0 and np.max(err_mm) < 30.0
+
+    # Trajectories from the angles, with the unit's geometry stored in the recording.
+    c3d = tmp_path / "run.c3d"
+    rec = run_cli("reconstruct", journal, "--out", c3d, "--json")
+    assert rec.returncode == 0, rec.stderr
+    summary = json.loads(rec.stdout)
+    assert summary["base_mm"] == 1000.0 and summary["source"] == "angles"
+    assert [m["label"] for m in summary["markers"]] == ["RO", "RY", "RG", "RC", "RB", "RV"]
+    assert c3d.stat().st_size > 0
+    refused = run_cli("reconstruct", journal, "--out", c3d, "--calibration", truth)
+    assert refused.returncode != 0 and "takes no --calibration" in refused.stderr
