@@ -104,5 +104,17 @@ def _run_scanner(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({**summary, "outputs": [str(args.out)]}))
     else:
-        print_summary(summary, [args.out])
+        _print_scanner(summary, args.out)
     return 0
+
+
+def _print_scanner(summary: dict[str, Any], out: Path) -> None:
+    """The text summary of a scanner reconstruction: frames, markers, precision model."""
+    print(
+        f"scanner {summary['stream']}: {summary['frames']} frames, 3-D from the "
+        f"{summary['source']} (base {summary['base_mm']:g} mm)"
+    )
+    for m in summary["markers"]:
+        sd = " / ".join("-" if v is None else f"{v:.3f}" for v in m["precision_sd_mm"])
+        print(f"  {m['label']:<4} {m['frames']:>7} frames   precision sd x / y / z {sd} mm")
+    print(f"  wrote              {out}")
