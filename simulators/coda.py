@@ -12,10 +12,11 @@ the rate's limit (``aliased``, under the lower-numbered entry's ID) and a
 reflection ghost (``ghost suspected``).
 
 Truth: the frame truth CSV (:mod:`spotlab.simulators.truth`) has, per scan, the
-world time of the scan start and columns ``led<ID>_x_mm ...`` with every scene
-marker's true position then (scanner frame, mm); the scene is deterministic
-(:func:`~spotlab.simulators.coda_scene.marker_positions`), so the position at
-any crossing instant follows from it.
+world time of the scan start and columns ``led<ID>_x_mm ...`` with every moving
+scene marker's true position then (world frame, mm: the scanner frame of a unit
+at the origin; a unit placed elsewhere, ``pose``, sees it turned and shifted);
+the scene is deterministic (:func:`~spotlab.simulators.coda_scene.marker_positions`),
+so the position at any crossing instant follows from it.
 
 Nothing here imports the driver: the device side is written from the spec.
 """
@@ -104,7 +105,7 @@ class CodaStream(Mcs1Stream):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """counts (N, 3), dt µs (N, 3), xyz 0.01 mm (N, 3), flags (N,) of markers ``ids``."""
         dev = self.device
-        cr = scene.crossings(ids, t0_s, self.sweep_s, dev.base_mm, ghost=ghost)
+        cr = scene.crossings(ids, t0_s, self.sweep_s, dev.base_mm, ghost=ghost, pose=dev.pose)
         r = np.linalg.norm(cr.positions[:, 0], axis=-1)
         counts = scene.measure(cr.angles, r, dev.fault_rates.ambient, rng)
         if not ghost:
@@ -130,7 +131,9 @@ class CodaStream(Mcs1Stream):
         limit = cw.marker_limit(cfg.rate_mhz)
         table = np.asarray(cfg.table, dtype=np.int64)
         entry = np.arange(table.shape[0])
-        in_scene = table <= dev.scene_markers
+        in_scene = (table <= dev.scene_markers) | (
+            dev.reference & np.isin(table, list(scene.REFERENCE))
+        )
         ids, entries = table[in_scene], entry[in_scene]
         records: list[cw.MarkerRecord] = []
         if ids.shape[0]:
@@ -188,6 +191,11 @@ class CodaDevice(Mcs1Device[CodaConfig]):
         The mirror base (reported in ``VER:0``).
     fault_rates : CodaFaults, optional
         The scanner's own faults and ambient light.
+    pose : Pose, optional
+        Where the unit stands in the world (default: the origin, looking along +y).
+    reference : bool
+        The static reference object of :data:`~spotlab.simulators.coda_scene.REFERENCE`
+        (IDs 50-53) is in the scene too.
     serial : str
         Serial number in the ``VER:0`` reply.
     seed : int
@@ -214,6 +222,8 @@ class CodaDevice(Mcs1Device[CodaConfig]):
         scene_markers: int = 8,
         base_mm: float = 1000.0,
         fault_rates: CodaFaults | None = None,
+        pose: scene.Pose | None = None,
+        reference: bool = False,
         serial: str = "SIM00031",
         seed: int = 0,
         truth: str | Path | None = None,
@@ -229,6 +239,8 @@ class CodaDevice(Mcs1Device[CodaConfig]):
         self.scene_markers = scene_markers
         self.base_mm = float(base_mm)
         self.fault_rates = fault_rates if fault_rates is not None else CodaFaults()
+        self.pose = pose if pose is not None else scene.Pose()
+        self.reference = bool(reference)
         self.scene_seed = int(seed)
         super().__init__(
             clock, faults, serial=serial, seed=seed,

@@ -34,19 +34,55 @@ GHOST_WALL_Y_MM = 4500.0
 _HALF_FOV = math.radians(cw.FOV_DEG / 2)
 
 
-def marker_positions(ids: npt.NDArray[np.int64], t_s: F64) -> F64:
-    """Positions (mm) of markers ``ids`` at world times ``t_s`` (broadcast together).
+#: A static rigid reference object (an L-frame on a stand) every unit can see, by
+#: marker ID (codes WR, WO, WY, WG): world positions, mm.
+REFERENCE = {
+    50: (-400.0, 3400.0, -500.0),
+    51: (400.0, 3400.0, -500.0),
+    52: (-400.0, 3400.0, 300.0),
+    53: (-400.0, 3000.0, -500.0),
+}
+_REF_TABLE = np.full((cw.MAX_MARKERS + 1, 3), np.nan)
+for _id, _p in REFERENCE.items():
+    _REF_TABLE[_id] = _p
 
-    Each marker sits on a ring of radius 250 mm about (0, 3000, 0) at an angle set by
-    its ID, and the ring sways: x by 150 mm at 0.4 Hz, depth by 250 mm at 0.25 Hz,
-    z by 150 mm at 0.6 Hz, each marker with its own phase.
+
+def marker_positions(ids: npt.NDArray[np.int64], t_s: F64) -> F64:
+    """World positions (mm) of markers ``ids`` at world times ``t_s`` (broadcast together).
+
+    The world (lab) frame is the scanner frame of a unit at the origin looking along
+    +y. Each moving marker sits on a ring of radius 250 mm about (0, 3000, 0) at an
+    angle set by its ID, and the ring sways: x by 150 mm at 0.4 Hz, depth by 250 mm at
+    0.25 Hz, z by 150 mm at 0.6 Hz, each marker with its own phase. The markers of
+    :data:`REFERENCE` stand still.
     """
     k = ids.astype(np.float64)
     phi = k * 2.399963  # the golden angle: IDs spread around the ring
     x = 250.0 * np.cos(phi) + 150.0 * np.sin(2 * np.pi * 0.4 * t_s + 0.3 * k)
     y = 3000.0 + 250.0 * np.sin(2 * np.pi * 0.25 * t_s + 0.2 * k)
     z = 250.0 * np.sin(phi) + 150.0 * np.sin(2 * np.pi * 0.6 * t_s + 0.5 * k)
-    return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+    moving = np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+    fixed = np.broadcast_to(_REF_TABLE[np.clip(ids, 0, cw.MAX_MARKERS)], moving.shape)
+    return np.where(np.isfinite(fixed), fixed, moving)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Where a unit stands in the world: its origin at ``origin`` (mm), turned ``yaw_deg``
+    about the vertical, counter-clockwise seen from above (its +y towards world -x)."""
+
+    yaw_deg: float = 0.0
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def rotation(self) -> F64:
+        """Columns: the unit's axes in the world frame."""
+        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    def to_unit(self, p_world: F64) -> F64:
+        """World points (..., 3) in the unit's scanner frame."""
+        return (p_world - np.asarray(self.origin)) @ self.rotation
 
 
 def mirror_angles(p: F64, base_mm: float) -> F64:
@@ -77,16 +113,25 @@ class Crossings:
 
 
 def crossings(
-    ids: npt.NDArray[np.int64], t0_s: float, sweep_s: float, base_mm: float, ghost: bool = False
+    ids: npt.NDArray[np.int64],
+    t0_s: float,
+    sweep_s: float,
+    base_mm: float,
+    ghost: bool = False,
+    pose: Pose | None = None,
 ) -> Crossings:
     """Solve, for every marker and mirror, the instant the sweep meets the marker.
 
-    ``ghost``: the marker's reflection in the wall at :data:`GHOST_WALL_Y_MM`.
+    ``ghost``: the marker's reflection in the wall at :data:`GHOST_WALL_Y_MM` (of the
+    unit's frame); ``pose``: where the unit stands (default: at the world origin).
+    Positions are returned in the unit's frame.
     """
     n = ids.shape[0]
     dt = np.full((n, 3), sweep_s / 2)
     for _ in range(4):  # the marker moves < 1 mm in a scan: converges at once
         p = marker_positions(ids[:, None], t0_s + dt)
+        if pose is not None:
+            p = pose.to_unit(p)
         if ghost:
             p = p * np.array([1.0, -1.0, 1.0]) + np.array([0.0, 2 * GHOST_WALL_Y_MM, 0.0])
         a = mirror_angles(p, base_mm)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from spotlab.simulators import mcs1_service as mcs1
 from spotlab.simulators.coda import CodaDevice, CodaFaults
+from spotlab.simulators.coda_scene import Pose
 from spotlab.simulators.faults import FaultInjector
 
 if TYPE_CHECKING:
@@ -51,6 +52,11 @@ class CodaSimOptions:
         The scanner's own faults per marker and scan (occlusion: per mirror too).
     ambient : float
         Ambient light 0-1.
+    pose : str
+        ``"YAW,X,Y,Z"``: the unit turned YAW degrees about the vertical (counter-clockwise
+        from above) at (X, Y, Z) mm of the world frame; empty: at the origin.
+    reference : int
+        1: the static reference object (IDs 50-53, codes WR, WO, WY, WG) is in the scene.
     lab_name, lab :
         Publish the frame pulses to the lab folder under this name.
     serial : str
@@ -72,6 +78,8 @@ class CodaSimOptions:
     ghost_rate: float = 0.0005
     occlusion_rate: float = 0.001
     ambient: float = 0.0
+    pose: str = ""
+    reference: int = 0
     lab_name: str = ""
     lab: Path | None = None
     serial: str = "SIM00031"
@@ -87,6 +95,17 @@ class CodaSimOptions:
         for name in ("colour_rate", "ghost_rate", "occlusion_rate", "ambient"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name.replace('_', ' ')} must be 0 to 1")
+        self.unit_pose()
+
+    def unit_pose(self) -> Pose:
+        """``pose`` parsed; ValueError if it is not ``YAW,X,Y,Z``."""
+        if not self.pose:
+            return Pose()
+        try:
+            yaw, x, y, z = (float(v) for v in self.pose.split(","))
+        except ValueError:
+            raise ValueError(f"pose must be YAW,X,Y,Z (degrees, mm), got {self.pose!r}") from None
+        return Pose(yaw, (x, y, z))
 
 
 def build_coda_device(options: CodaSimOptions, now_ns: int | None = None) -> CodaDevice:
@@ -101,6 +120,7 @@ def build_coda_device(options: CodaSimOptions, now_ns: int | None = None) -> Cod
         clock,
         FaultInjector(options.faults, rate=options.fault_rate, seed=options.seed),
         scene_markers=options.markers, base_mm=options.base_mm, fault_rates=rates,
+        pose=options.unit_pose(), reference=bool(options.reference),
         serial=options.serial, seed=options.seed, truth=options.truth,
         fault_log=options.fault_log, default_rate_hz=options.rate_hz, now_ns=clock.epoch_ns,
         lab=mcs1.lab_publisher(options, clock),

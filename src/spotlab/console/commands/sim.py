@@ -184,6 +184,15 @@ def add_parser(sub: Any) -> None:
         metavar="N=SOURCE",
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
+    csx = p.add_argument_group("coda (optomechanical scanner)")
+    csx.add_argument(
+        "--pose", default="", metavar="YAW,X,Y,Z",
+        help="coda: the unit turned YAW degrees about the vertical at X,Y,Z mm of the world",
+    )  # fmt: skip
+    csx.add_argument(
+        "--reference", action="store_true",
+        help="coda: a static L-frame (markers WR, WO, WY, WG) in the scene, to align units",
+    )  # fmt: skip
     cen = p.add_argument_group("centroid (video cameras, passive markers)")
     cen.add_argument(
         "--markers", type=int, default=None,
@@ -376,6 +385,7 @@ def coda_options_from_args(args: argparse.Namespace) -> CodaSimOptions:
         seed=args.seed, truth=args.truth, fault_log=args.fault_log, faults=args.faults,
         clock_offset_s=args.clock_offset, clock_drift_ppm=args.clock_drift_ppm,
         clock_jitter_s=args.clock_jitter, lab_name=args.lab_name or "coda", lab=args.lab,
+        pose=args.pose, reference=int(args.reference),
     )  # fmt: skip
     try:
         options.validate()
