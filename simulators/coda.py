@@ -127,7 +127,7 @@ class CodaStream(Mcs1Stream):
         dev, cfg = self.device, self.cconfig
         rng = np.random.default_rng([dev.scene_seed, self.index, self.frame_no])
         w0 = float(self.clock.world_ns(self._osc0))
-        t0_s = (w0 - self.clock.epoch_ns) / 1e9
+        t0_s = w0 / 1e9  # world time: every simulated unit on the machine sees one scene
         limit = cw.marker_limit(cfg.rate_mhz)
         table = np.asarray(cfg.table, dtype=np.int64)
         entry = np.arange(table.shape[0])

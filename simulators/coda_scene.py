@@ -51,10 +51,11 @@ def marker_positions(ids: npt.NDArray[np.int64], t_s: F64) -> F64:
     """World positions (mm) of markers ``ids`` at world times ``t_s`` (broadcast together).
 
     The world (lab) frame is the scanner frame of a unit at the origin looking along
-    +y. Each moving marker sits on a ring of radius 250 mm about (0, 3000, 0) at an
-    angle set by its ID, and the ring sways: x by 150 mm at 0.4 Hz, depth by 250 mm at
-    0.25 Hz, z by 150 mm at 0.6 Hz, each marker with its own phase. The markers of
-    :data:`REFERENCE` stand still.
+    +y; ``t_s`` is world time (the machine's monotonic clock, s), so that simulated
+    units in separate processes see one scene. Each moving marker sits on a ring of
+    radius 250 mm about (0, 3000, 0) at an angle set by its ID, and the ring sways:
+    x by 150 mm at 0.4 Hz, depth by 250 mm at 0.25 Hz, z by 150 mm at 0.6 Hz, each
+    marker with its own phase. The markers of :data:`REFERENCE` stand still.
     """
     k = ids.astype(np.float64)
     phi = k * 2.399963  # the golden angle: IDs spread around the ring

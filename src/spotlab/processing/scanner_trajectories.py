@@ -30,7 +30,6 @@ from numpy.typing import NDArray
 from spotlab.acquisition.replay import replay
 from spotlab.core.errors import RecordingError
 from spotlab.core.frames import FrameBlock
-from spotlab.core.wire import StreamDecoder
 from spotlab.io import Trial
 from spotlab.io.journal import JournalReader
 from spotlab.processing.decoding import decoder_for, input_suffix
@@ -86,31 +85,43 @@ def is_scanner_recording(path: Path) -> bool:
     return bool(specs) and all(isinstance(s, dict) and s.get("kind") == SCAN_KIND for s in specs)
 
 
-def read_scanner_recording(path: Path) -> ScannerRecording:
-    """Decode every frame of a recording of one scanner.
+def read_scanner_recording(path: Path, stream: str | None = None) -> ScannerRecording:
+    """Decode every frame of one scanner stream of a recording.
+
+    Parameters
+    ----------
+    path : Path
+        The journal.
+    stream : str, optional
+        The stream to read; needed when the recording holds several streams (other
+        scanners, a timer).
 
     Raises
     ------
     InputError
-        For several streams, no frames, or no geometry in the metadata.
+        For several streams and no ``stream``, a stream that is not a scanner's, no
+        frames, or no geometry in the metadata.
     """
-    metas: list[dict[str, Any]] = []
-
-    def factory(metadata: dict[str, Any]) -> StreamDecoder:
-        metas.append(metadata)
-        return decoder_for(metadata)
-
     names: set[str] = set()
     blocks: list[FrameBlock] = []
     try:
-        for name, block in replay(path, factory):
+        declared = JournalReader(path).streams
+        for name, block in replay(path, decoder_for):
             names.add(name)
-            blocks.append(block)
+            if stream is None or name == stream:
+                blocks.append(block)
     except RecordingError as exc:
         raise InputError(f"{path}: {exc}") from None
-    if len(names) != 1 or not blocks:
-        raise InputError(f"{path}: expected the frames of one scanner stream, found {len(names)}")
-    spec = metas[-1].get("spec") or {}
+    if stream is None and len(names) != 1:
+        raise InputError(
+            f"{path}: {len(names)} streams ({', '.join(sorted(names))}); name the scanner's"
+        )
+    stream = stream if stream is not None else next(iter(names), "")
+    if stream not in names or not blocks:
+        raise InputError(f"{path}: no frames of a stream {stream!r}")
+    spec = declared.get(stream, {}).get("spec") or {}
+    if spec.get("kind") != SCAN_KIND:
+        raise InputError(f"{path}: stream {stream!r} is not a scanner's ({SCAN_KIND})")
     meta = spec.get("metadata", {})
     geometry = meta.get("geometry")
     if not isinstance(geometry, dict) or "base_mm" not in geometry:
@@ -135,7 +146,7 @@ def read_scanner_recording(path: Path) -> ScannerRecording:
     grid_ticks[k] = ticks
     return ScannerRecording(
         values, grid_flags, grid_ticks, float(spec["rate_hz"]), float(geometry["base_mm"]),
-        labels, next(iter(names)),
+        labels, stream,
     )  # fmt: skip
 
 
