@@ -1,4 +1,4 @@
-"""Mutation fuzzing of every other decoder and reader (TMR, CEN, journal, C3D, TRC, rig
+"""Mutation fuzzing of every other decoder and reader (TMR, CEN, CSX, journal, C3D, TRC, rig
 TOML, marker-model JSON): only spotlab's documented errors may come out.
 
 Prints one JSON object per target: inputs, inputs that ended in a documented spotlab

@@ -17,6 +17,7 @@ from spotlab.drivers.base import DeviceInfo, Driver
 DRIVERS: dict[str, tuple[str, str]] = {
     "selspot": ("spotlab.drivers.selspot", "SelspotDriver"),
     "timer": ("spotlab.drivers.timer", "TimerDriver"),
+    "coda": ("spotlab.drivers.coda", "CodaDriver"),
     "centroid": ("spotlab.drivers.centroid", "CentroidDriver"),
     "lsl": ("spotlab.drivers.lsl", "LslInletDriver"),
     "oak": ("spotlab.drivers.oak", "OakDriver"),

@@ -290,7 +290,11 @@ def timer_url_for(options: TimerSimOptions) -> str:
 
 
 def device_from_url(url: str, now_ns: int | None = None) -> Mcs1Device[Any]:
-    """The simulated device a ``sim://selspot|timer|centroid?...`` URL describes."""
+    """The simulated device a ``sim://selspot|timer|centroid|coda?...`` URL describes."""
+    if urlsplit(url).netloc == "coda":
+        from spotlab.simulators import coda_service as csx
+
+        return csx.build_coda_device(csx.coda_options_from_url(url), now_ns=now_ns)
     if urlsplit(url).netloc == "centroid":
         from spotlab.simulators import centroid_service as cen
 

@@ -41,6 +41,13 @@ def _agc(value: SettingValue) -> int | None:
     return None if value == "off" else _int(value)
 
 
+def _markers(value: SettingValue) -> int | str:
+    """A number of markers, or colour codes joined by ``+`` (``RO+GB``; commas part settings)."""
+    if isinstance(value, str) and not value.strip().isdigit():
+        return value.replace("+", ",")
+    return _int(value)
+
+
 Converter = Callable[[SettingValue], Any]
 
 #: Family -> setting key -> (driver keyword, converter, help text).
@@ -57,6 +64,13 @@ FAMILY_SETTINGS: dict[str, dict[str, tuple[str, Converter, str]]] = {
     "timer": {
         "rate": ("rate_hz", _float, "timer frame rate in Hz"),
         "slots": ("slots", _int, "edge record slots per frame"),
+        "baud": ("baud", _baud, "line rate while streaming, or 'auto'"),
+    },
+    "coda": {
+        "rate": ("rate_hz", _float, "scan rate in Hz, 50-800"),
+        "markers": ("markers", _markers, "markers: M (IDs 1..M) or colour codes, RO+GB+..."),
+        "out": ("mode", str, "output: 3D, RAW or BOTH"),
+        "base": ("base_mm", _float, "the mirror base (mm) the unit must report"),
         "baud": ("baud", _baud, "line rate while streaming, or 'auto'"),
     },
     "centroid": {

@@ -138,17 +138,21 @@ def _recorded(folder: Path, url: str, driver: str) -> tuple[dict[str, Any], byte
     """0.3 s recorded from an in-process simulator: (stream metadata, its RX bytes, journal)."""
     from spotlab.acquisition.recorder import Recorder
     from spotlab.acquisition.session import Session
+    from spotlab.drivers.base import Driver
     from spotlab.drivers.centroid import CentroidDriver
+    from spotlab.drivers.coda import CodaDriver
     from spotlab.drivers.timer import TimerDriver
     from spotlab.io._journal_format import RecordType
     from spotlab.io.journal import JournalReader
 
     journal = folder / f"{driver}.spj"
-    device = (
-        TimerDriver(url, rate_hz=100.0)
-        if driver == "timer"
-        else CentroidDriver(url, cameras=2, rate_hz=100.0)
-    )
+    device: Driver
+    if driver == "timer":
+        device = TimerDriver(url, rate_hz=100.0)
+    elif driver == "coda":
+        device = CodaDriver(url, markers=4, rate_hz=200.0)
+    else:
+        device = CentroidDriver(url, cameras=2, rate_hz=100.0)
     with Session([device], [Recorder(journal)], close_devices=True) as session:
         session.run_for(0.3)
     reader = JournalReader(journal)
@@ -174,10 +178,12 @@ def _stream_run(
         import json
 
         from spotlab.drivers.centroid import decoder_from_metadata as centroid_decoder
+        from spotlab.drivers.coda import decoder_from_metadata as coda_decoder
         from spotlab.drivers.timer import decoder_from_metadata as timer_decoder
 
         meta = json.loads((folder / f"{driver}.meta.json").read_text())
-        decoder_for = timer_decoder if driver == "timer" else centroid_decoder
+        decoders: dict[str, Callable[[Any], Any]] = {"timer": timer_decoder, "coda": coda_decoder}
+        decoder_for = decoders.get(driver, centroid_decoder)
 
         def run(data: bytes, rng: random.Random) -> None:
             decoder: Any = decoder_for(meta)
@@ -296,6 +302,10 @@ TARGETS: dict[str, _Target] = {
     "cen": _Target(
         _stream_corpus("sim://centroid?cameras=2&markers=10&rate=100", "centroid"),
         _stream_run("centroid"),
+    ),
+    "csx": _Target(
+        _stream_corpus("sim://coda?markers=4&rate=200&colour_rate=0.05&ghost_rate=0.05", "coda"),
+        _stream_run("coda"),
     ),
     "journal": _Target(_journal_corpus, _file_run(".spj", _read_journal)),
     "c3d": _Target(_c3d_corpus, _file_run(".c3d", _c3d_read)),

@@ -16,6 +16,7 @@ import pytest
 
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers.centroid import CentroidDriver, blobs_from_blocks
+from spotlab.drivers.coda import CodaDriver
 from spotlab.drivers.selspot import SelspotDriver
 from spotlab.drivers.timer import TimerDriver, extract_edges
 from spotlab.simulators import service
@@ -24,11 +25,13 @@ from spotlab.simulators.centroid_service import (
     centroid_url_for,
     serve_centroid_pty,
 )
+from spotlab.simulators.coda_service import CodaSimOptions, coda_url_for, serve_coda_pty
 from spotlab.testing.mcs1_conformance import Mcs1Family
 
 _SELSPOT_SIM = service.SelspotSimOptions(cameras=4, leds=32, seed=3)
 _TIMER_SIM = service.TimerSimOptions(seed=3)
 _CENTROID_SIM = CentroidSimOptions(cameras=4, markers=20, seed=5)
+_CODA_SIM = CodaSimOptions(markers=8, seed=3)
 
 
 def _check_selspot_stream(driver: SelspotDriver, blocks: list[FrameBlock]) -> None:
@@ -55,6 +58,26 @@ def _check_centroid_stream(driver: CentroidDriver, blocks: list[FrameBlock]) -> 
     step = np.diff(blobs.exposure_us, axis=0)
     assert np.nanmax(np.abs(step - 10_000)) < 2 + 10_000 * 2e-4
     assert (blobs.counts <= 128).all() and blobs.counts.sum() > 0
+
+
+def _check_coda_stream(driver: CodaDriver, blocks: list[FrameBlock]) -> None:
+    data = np.concatenate([b.data for b in blocks])
+    flags = np.concatenate([b.flags for b in blocks])
+    m = driver.config.n_markers
+    assert data.shape[1] == 2 * m + 4
+    # The table's rows hold only unflagged records of their own ID.
+    used = flags[:, :m, 0] != 0
+    assert (flags[:, :m, 0][used] & 0x70 == 0).all()
+    ids = data[:, :m, 0, 0]
+    assert (ids[used] == np.broadcast_to(np.asarray(driver.config.ids), ids.shape)[used]).all()
+    # Markers are seen most of the time, some 3 m in front of the unit.
+    assert used.mean() > 0.9
+    depth = data[:, :m, 0, 2]
+    assert 2000 < np.nanmedian(depth) < 4000
+    # Each mirror crosses at its own instant within the sweep (0.8 of the 5 ms scan).
+    dt = data[:, :m, 0, 7:10]
+    assert np.nanmax(dt) < 4000 and (np.nanstd(dt, axis=2) > 0).any()
+    assert driver.spec.metadata["geometry"]["base_mm"] == 1000.0
 
 
 def _selspot_bandwidth() -> list[tuple[str, str]]:
@@ -148,7 +171,35 @@ CENTROID = Mcs1Family(
     check_stream=_check_centroid_stream,
 )
 
-#: Every MCS-1 family, by name.
-FAMILIES: dict[str, Mcs1Family] = {f.name: f for f in (SELSPOT, TIMER, CENTROID)}
+CODA = Mcs1Family(
+    name="coda",
+    code="CSX",
+    driver=CodaDriver,
+    serve_pty=lambda: serve_coda_pty(_CODA_SIM),
+    sim_url=lambda: coda_url_for(_CODA_SIM),
+    version_words=6,
+    version_ranges={3: (100_000, 5_000_000), 4: (16_000, 16_000), 5: (40_000, 40_000)},
+    rejected=[
+        ("RATE:49999", "ERROR23"),
+        ("RATE:800001", "ERROR23"),
+        ("MARK:RO,XX", "ERROR81"),  # a code outside the colour table
+        ("MARK:RO,RO", "ERROR81"),
+        ("OUT:2D", "ERROR23"),
+        ("OUT:3D,RAW", "ERROR07"),
+    ],
+    accepted=["RATE:100000", "OUT:3D", "MARK:RO,GB,WV", "OUT:BOTH", "INIT:"],
+    # no marker table after reset; then 9600 baud cannot carry the frames
+    bandwidth=[("START:", "ERROR82"), ("MARK:RO,GB", "OKAY"), ("START:", "ERROR80")],
+    stream={"markers": 4, "rate_hz": 200.0, "mode": "BOTH"},
+    frames=60,
+    period_ticks=5_000,  # µs
+    period_tolerance=10,
+    frame_shape=(12, 1, 10),
+    refused_while_streaming="MARK:RO",
+    check_stream=_check_coda_stream,
+)
 
-__all__ = ["CENTROID", "FAMILIES", "SELSPOT", "TIMER"]
+#: Every MCS-1 family, by name.
+FAMILIES: dict[str, Mcs1Family] = {f.name: f for f in (SELSPOT, TIMER, CENTROID, CODA)}
+
+__all__ = ["CENTROID", "CODA", "FAMILIES", "SELSPOT", "TIMER"]

@@ -141,7 +141,7 @@ def test_sim_url_rejects_bad_options() -> None:
     with pytest.raises(serial.SerialException, match="cameras"):
         serial.serial_for_url("sim://selspot?cameras=9")
     with pytest.raises(serial.SerialException, match="selspot"):
-        serial.serial_for_url("sim://coda")
+        serial.serial_for_url("sim://linear")  # no such family (coda is one since issue 18)
 
 
 def test_sim_url_disconnect_and_reopen() -> None:

@@ -14,7 +14,14 @@ from typing import Any
 
 from spotlab.console.progress import Progress
 from spotlab.console.summaries import print_summary
+from spotlab.processing.errors import InputError
 from spotlab.processing.paths import check_output_paths
+from spotlab.processing.scanner_trajectories import (
+    SOURCES,
+    is_scanner_recording,
+    read_scanner_recording,
+    scanner_trial,
+)
 from spotlab.processing.session_times import calibration_for
 from spotlab.processing.trajectories import check_outputs, reconstruct_file, write_trial
 from spotlab.reconstruction import METHODS
@@ -27,7 +34,9 @@ def add_parser(sub: Any) -> None:
         description="Triangulate every frame of the observations (npz, CSV or a .spj "
         "recording) with a calibrated rig and write the trajectories as C3D or TRC "
         "(by the suffix of --out). The blobs of a video-centroid recording are identified "
-        "and named by a marker model (--model, or the one stored in the recording).",
+        "and named by a marker model (--model, or the one stored in the recording). A "
+        "scanner (coda) recording needs no calibration: its 3-D comes from the unit's "
+        "geometry stored in the recording (--scanner).",
     )
     p.add_argument("input", type=Path, help="observations: OBS.npz, OBS.csv or RECORDING.spj")
     p.add_argument(
@@ -46,6 +55,13 @@ def add_parser(sub: Any) -> None:
         help="marker model naming the markers of a video-centroid recording (default: the "
         "one stored in the recording by spotlab record --model)",
     )
+    p.add_argument(
+        "--scanner",
+        choices=SOURCES,
+        default="angles",
+        help="scanner recordings: 3-D from the raw angles, each at its own crossing instant "
+        "(angles, default) or the unit's own 3-D (device)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
 
@@ -53,6 +69,8 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     check_output_paths([("--out", args.out)])
     check_outputs([args.out])
+    if is_scanner_recording(args.input):
+        return _run_scanner(args)
     calibration = args.calibration
     if calibration is None:
         calibration = calibration_for(args.input, None)
@@ -71,3 +89,32 @@ def run(args: argparse.Namespace) -> int:
     else:
         print_summary(result.summary, [args.out])
     return 0
+
+
+def _run_scanner(args: argparse.Namespace) -> int:
+    """A scanner recording: trajectories from its angles (or the unit's 3-D), no calibration."""
+    if args.calibration is not None or args.labels or args.model is not None:
+        raise InputError(
+            f"{args.input}: a scanner recording takes no --calibration, --labels or --model "
+            "(its geometry and marker codes are in the recording)"
+        )
+    trial, summary = scanner_trial(read_scanner_recording(args.input), args.scanner)
+    write_trial(args.out, trial)
+    summary = {"input": str(args.input), **summary}
+    if args.json:
+        print(json.dumps({**summary, "outputs": [str(args.out)]}))
+    else:
+        _print_scanner(summary, args.out)
+    return 0
+
+
+def _print_scanner(summary: dict[str, Any], out: Path) -> None:
+    """The text summary of a scanner reconstruction: frames, markers, precision model."""
+    print(
+        f"scanner {summary['stream']}: {summary['frames']} frames, 3-D from the "
+        f"{summary['source']} (base {summary['base_mm']:g} mm)"
+    )
+    for m in summary["markers"]:
+        sd = " / ".join("-" if v is None else f"{v:.3f}" for v in m["precision_sd_mm"])
+        print(f"  {m['label']:<4} {m['frames']:>7} frames   precision sd x / y / z {sd} mm")
+    print(f"  wrote              {out}")

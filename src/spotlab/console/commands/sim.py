@@ -21,6 +21,7 @@ from spotlab.simulators.centroid_service import (
     CentroidSimOptions,
     serve_centroid_pty,
 )
+from spotlab.simulators.coda_service import CodaSimOptions, serve_coda_pty, serve_coda_tcp
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import lab_dir
 from spotlab.simulators.motions import MOTIONS, from_c3d, make_motion, static_points
@@ -29,6 +30,20 @@ from spotlab.testing.centroid_model import write_body_model
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
     from spotlab.simulators.transports.tcp import TcpServer
+
+
+class _RateAction(argparse.Action):
+    """``--rate``, noting that it was given (families differ in their default rate)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        setattr(namespace, self.dest, values)
+        namespace.rate_given = True
 
 
 def add_parser(sub: Any) -> None:
@@ -41,7 +56,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "family",
-        choices=["selspot", "timer", "centroid", "qualisys", "natnet"],
+        choices=["selspot", "timer", "centroid", "coda", "qualisys", "natnet"],
         help="device family",
     )
     where = p.add_mutually_exclusive_group()
@@ -64,7 +79,11 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--leds", type=int, default=8, help="LEDs, 1-128 (default 8)")
     p.add_argument(
-        "--rate", type=float, default=100.0, help="frame rate the scene is built for, Hz"
+        "--rate",
+        type=float,
+        default=100.0,
+        action=_RateAction,
+        help="frame rate the scene is built for, Hz (default 100; coda: scan rate, default 300)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of noise, motion and random faults")
     p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
@@ -165,11 +184,20 @@ def add_parser(sub: Any) -> None:
         metavar="N=SOURCE",
         help="timer: wire input N (0-7) to the frame pulses of the lab device SOURCE; repeat",
     )
+    csx = p.add_argument_group("coda (optomechanical scanner)")
+    csx.add_argument(
+        "--pose", default="", metavar="YAW,X,Y,Z",
+        help="coda: the unit turned YAW degrees about the vertical at X,Y,Z mm of the world",
+    )  # fmt: skip
+    csx.add_argument(
+        "--reference", action="store_true",
+        help="coda: a static L-frame (markers WR, WO, WY, WG) in the scene, to align units",
+    )  # fmt: skip
     cen = p.add_argument_group("centroid (video cameras, passive markers)")
     cen.add_argument(
         "--markers", type=int, default=None,
         help="markers: on the walking body (default 40), on the wand (2 or 3, default 3), "
-        "of the L-frame (default 4)",
+        "of the L-frame (default 4); coda: in the scene, IDs 1..M (default 8)",
     )  # fmt: skip
     cen.add_argument(
         "--wand-length", type=float, default=500.0, metavar="MM",
@@ -349,6 +377,23 @@ def centroid_options_from_args(args: argparse.Namespace) -> CentroidSimOptions:
     return options
 
 
+def coda_options_from_args(args: argparse.Namespace) -> CodaSimOptions:
+    """Scanner simulator options from parsed command-line arguments (``--rate`` default 300)."""
+    options = CodaSimOptions(
+        markers=8 if args.markers is None else args.markers,
+        rate_hz=args.rate if getattr(args, "rate_given", False) else 300.0,
+        seed=args.seed, truth=args.truth, fault_log=args.fault_log, faults=args.faults,
+        clock_offset_s=args.clock_offset, clock_drift_ppm=args.clock_drift_ppm,
+        clock_jitter_s=args.clock_jitter, lab_name=args.lab_name or "coda", lab=args.lab,
+        pose=args.pose, reference=int(args.reference),
+    )  # fmt: skip
+    try:
+        options.validate()
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    return options
+
+
 def check_args(args: argparse.Namespace) -> None:
     """Refuse what would fail once the device serves: bad output paths, lab folder,
     fault schedule or motion file (a failure in the serving thread is no clear error)."""
@@ -391,6 +436,10 @@ def run(args: argparse.Namespace) -> int:
         if args.model_out is not None:
             write_body_model(args.model_out, options.markers, options.seed)
         return _serve(args, serve_centroid_pty(options))
+    if args.family == "coda":
+        options = coda_options_from_args(args)
+        server = serve_coda_tcp(options, port=args.tcp) if args.tcp is not None else None
+        return _serve(args, server if server is not None else serve_coda_pty(options))
     if args.family == "timer":
         if args.tcp is not None:
             raise CommandError("the timer simulator serves on a pseudo-terminal only (--pty)")
