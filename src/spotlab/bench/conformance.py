@@ -25,6 +25,7 @@ SUITES: dict[str, tuple[str, str]] = {
     "selspot": ("spotlab.testing.family_conformance", "SelspotConformance"),
     "timer": ("spotlab.testing.family_conformance", "TimerConformance"),
     "centroid": ("spotlab.testing.family_conformance", "CentroidConformance"),
+    "coda": ("spotlab.testing.family_conformance", "CodaConformance"),
     "qualisys": ("spotlab.testing.qualisys_conformance", "QualisysConformance"),
     "natnet": ("spotlab.testing.natnet_conformance", "NatNetConformance"),
 }

@@ -1,7 +1,7 @@
 """The conformance suite of every MCS-1 family with the family's own tests.
 
-:class:`SelspotConformance`, :class:`TimerConformance` and
-:class:`CentroidConformance` are the shared suite
+:class:`SelspotConformance`, :class:`TimerConformance`, :class:`CentroidConformance`
+and :class:`CodaConformance` are the shared suite
 (:class:`~spotlab.testing.mcs1_conformance.Mcs1Conformance`) with the family's
 description and the tests only that family needs. ``tests/conformance`` runs them
 against the simulators (and a device with ``--hw``); ``spotlab bench`` runs them
@@ -10,10 +10,13 @@ against the port it is given.
 
 from __future__ import annotations
 
+import pytest
 import serial
 
+from spotlab.core.errors import ConfigurationError
+from spotlab.drivers.coda import CodaDriver
 from spotlab.testing.mcs1_conformance import Mcs1Conformance
-from spotlab.testing.mcs1_families import CENTROID, SELSPOT, TIMER
+from spotlab.testing.mcs1_families import CENTROID, CODA, SELSPOT, TIMER
 from spotlab.testing.wire import ask
 
 ERROR_OUT_OF_RANGE = "ERROR23"
@@ -68,4 +71,24 @@ class CentroidConformance(Mcs1Conformance):
     family = CENTROID
 
 
-__all__ = ["CentroidConformance", "SelspotConformance", "TimerConformance"]
+class CodaConformance(Mcs1Conformance):
+    """Every test of the MCS-1 suite, and the CSX ones: the ``CONF`` reply names the marker
+    table by colour codes, and a unit of another geometry than the one asked for is
+    refused."""
+
+    family = CODA
+
+    def test_conf_names_the_marker_table_by_colour_codes(self, link: serial.Serial) -> None:
+        assert ask(link, "MARK:RO,GB") == "OKAY"
+        assert ask(link, "OUT:RAW") == "OKAY"
+        words = ask(link, "CONF:").split()
+        assert words[0] == "CONF" and "OUT=RAW" in words and "MARK=RO,GB" in words
+
+    def test_a_unit_of_another_geometry_is_refused_in_one_line(self, device_port: str) -> None:
+        driver = CodaDriver(device_port, markers=2, base_mm=1234.0)
+        with pytest.raises(ConfigurationError, match=r"mirror base of .* not the 1234 mm"):
+            driver.start()
+        driver.close()
+
+
+__all__ = ["CentroidConformance", "CodaConformance", "SelspotConformance", "TimerConformance"]
