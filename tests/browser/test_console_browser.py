@@ -139,9 +139,18 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
     _shot(page, "3-trial-listed")
     # export it to C3D from the list
     row.locator("button.export").click()
-    page.wait_for_function(
-        "document.getElementById('trials-msg').textContent.includes('.c3d')", timeout=30_000
-    )
+    try:
+        # 2-4 s alone; one run of make test (the other worker busy, the preview restarting
+        # after the trial) went past 30 s without a word from the export
+        page.wait_for_function(
+            "document.getElementById('trials-msg').textContent.includes('.c3d')", timeout=60_000
+        )
+    except Exception:
+        _shot(page, "4-export-timed-out")
+        status = page.evaluate("JSON.stringify(window.spotlab.status)")
+        raise AssertionError(
+            f"no export after 60 s: trials-msg {page.inner_text('#trials-msg')!r}, status {status}"
+        ) from None
     assert "bad" not in (page.get_attribute("#trials-msg", "class") or "")
     _shot(page, "4-exported")
     c3d = data / "S01" / "session1" / "walk5s.c3d"
