@@ -6,11 +6,12 @@ and every frame before that stays empty. Offline the whole recording is there, s
 :func:`identify_both_ways` runs a second, independent identifier from the last frame
 to the first (tracking predicts as well backward as forward) and fills each marker-frame
 the forward pass left empty with the backward pass's label. Where both passes label a
-marker they must agree (within :data:`AGREE_MM`); where they do not, or where the joined
-frame puts two labels on one point, the frame's label is dropped for those markers: a
-gap, never a guess. Measured on the simulated walk of a subject the model never saw
-(docs/identification.md): a walk's first half second, when a foot or a wrist is still
-unlabelled, is what the backward pass fills.
+marker they must agree (within :data:`AGREE_MM`); where they do not, now and then, that
+frame's label is dropped: a gap, never a guess; a filled label that lands on a point
+another marker holds is dropped too. A marker on which the passes disagree throughout
+(:data:`SYSTEMATIC_SHARE`) keeps the forward labels alone. Measured on the simulated
+walk of a subject the model never saw (docs/identification.md): a walk's first half
+second, when a foot or a wrist is still unlabelled, is what the backward pass fills.
 """
 
 from __future__ import annotations
@@ -39,6 +40,11 @@ FloatArray = NDArray[np.float64]
 #: Two passes agree on a marker when they put it this close (mm): the same blobs
 #: triangulate to the same point; a wrong label is a marker's spacing away.
 AGREE_MM = 3.0
+#: A marker whose two passes disagree on more than this share of the frames both label
+#: it follows another identity in one of them throughout (a mirror-image cluster, two
+#: link-only markers exchanged): which one cannot be told from the passes alone, so that
+#: marker keeps the forward pass's labels, unfilled and undropped.
+SYSTEMATIC_SHARE = 0.1
 #: Frames lost in a row beyond which the identifier starts afresh (its prediction
 #: takes frames as consecutive; a label is earned again, never carried over a guess).
 MAX_LOST_FRAMES = 1
@@ -141,18 +147,22 @@ def join_passes(forward: PassResult, backward: PassResult) -> tuple[PassResult, 
         Points and residuals joined; the counters are the forward pass's.
     counts : dict
         ``filled_backward`` (marker-frames the backward pass added) and
-        ``label_conflicts`` (marker-frames dropped: the passes disagreed, or the joined
-        frame put two labels within :data:`AGREE_MM` of each other).
+        ``label_conflicts`` (marker-frames dropped: the passes disagreed now and then, or
+        a label filled from the backward pass fell within :data:`AGREE_MM` of another
+        label of the frame) and ``systematic_markers`` (markers whose passes disagreed on
+        more than :data:`SYSTEMATIC_SHARE` of their frames: forward labels kept).
     """
     fwd, bwd = forward.points, backward.points
     has_f = np.isfinite(fwd[..., 0])
     has_b = np.isfinite(bwd[..., 0])
     both = has_f & has_b
     disagree = both & (np.linalg.norm(fwd - bwd, axis=-1) > AGREE_MM)
-    fill = has_b & ~has_f
+    systematic = disagree.sum(axis=0) > SYSTEMATIC_SHARE * np.maximum(both.sum(axis=0), 1)
+    disagree &= ~systematic[None, :]
+    fill = has_b & ~has_f & ~systematic[None, :]
     points = np.where(fill[..., None], bwd, fwd)
     residual = np.where(fill, backward.residual_px, forward.residual_px)
-    drop = disagree | _doubled(points)
+    drop = disagree | (_doubled(points) & fill)
     points[drop] = np.nan
     residual[drop] = np.nan
     joined = PassResult(
@@ -167,6 +177,7 @@ def join_passes(forward: PassResult, backward: PassResult) -> tuple[PassResult, 
     counts = {
         "filled_backward": int((fill & ~drop).sum()),
         "label_conflicts": int(drop.sum()),
+        "systematic_markers": int(systematic.sum()),
     }
     return joined, counts
 

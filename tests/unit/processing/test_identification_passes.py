@@ -22,23 +22,28 @@ def _pass(points: np.ndarray) -> PassResult:
 
 
 def test_join_fills_agrees_and_drops() -> None:
-    F, M = 4, 3
+    F, M = 40, 4
     truth = np.arange(F * M * 3, dtype=float).reshape(F, M, 3) * 100.0
     fwd, bwd = truth.copy(), truth.copy()
     fwd[0, 0] = np.nan  # filled from the backward pass
     bwd[1, 1] = np.nan  # the forward pass's alone
     bwd[2, 2] += [0.0, 0.0, 0.5 * AGREE_MM]  # the same point, within the tolerance
-    bwd[3, 0] += [0.0, 2.0 * AGREE_MM, 0.0]  # the passes disagree: dropped
-    fwd[1, 2] = truth[1, 0]  # forward: marker 2 on marker 0's point, bwd has marker 2 empty
-    bwd[1, 2] = np.nan
+    bwd[3, 0] += [0.0, 2.0 * AGREE_MM, 0.0]  # the passes disagree once: dropped
+    fwd[5, 1] = np.nan  # the backward pass would fill marker 1 on marker 2's point
+    bwd[5, 1] = truth[5, 2]
+    bwd[:, 3] = truth[:, 3] + [50.0, 0.0, 0.0]  # marker 3: another identity throughout
+    fwd[7, 3] = np.nan
     joined, counts = join_passes(_pass(fwd), _pass(bwd))
     got = joined.points
     assert np.array_equal(got[0, 0], truth[0, 0]) and np.array_equal(got[1, 1], truth[1, 1])
     assert np.array_equal(got[2, 2], truth[2, 2])  # the forward point is kept
     assert np.isnan(got[3, 0]).all()
-    # two labels on one point: both dropped
-    assert np.isnan(got[1, 0]).all() and np.isnan(got[1, 2]).all()
-    assert counts == {"filled_backward": 1, "label_conflicts": 3}
+    assert np.isnan(got[5, 1]).all() and np.array_equal(got[5, 2], truth[5, 2])
+    # the systematic marker keeps the forward labels, unfilled
+    assert np.isnan(got[7, 3]).all()
+    kept = np.arange(F) != 7
+    assert np.array_equal(got[kept, 3], truth[kept, 3])
+    assert counts == {"filled_backward": 1, "label_conflicts": 2, "systematic_markers": 1}
     assert np.isnan(joined.residual_px[3, 0]) and joined.residual_px[0, 0] == 0.1
 
 
