@@ -42,27 +42,19 @@ def _children() -> set[int]:
 
 
 #: Tests whose simulators run in real time (the end-to-end runs, the console on its
-#: simulated lab). The heaviest (8-camera hubs at 300 Hz, calibrations of recordings)
-#: go to one xdist worker one after another, the others to the other worker one after
-#: another, so that at most two real-time runs share the machine, one of them light.
+#: simulated lab): one xdist worker takes them all, one after another. Their recordings
+#: are session fixtures: xdist does not keep a module's tests together, and a module
+#: fixture would be recorded again each time the worker came back to its module.
 REAL_TIME = ("tests/hil/", "tests/browser/", "tests/unit/console/test_console_web.py")
-HEAVY = (
-    "tests/hil/test_e2e_centroid_calibrate.py",
-    "tests/hil/test_e2e_calibrate.py",
-    "tests/hil/test_e2e_centroid_reconstruct.py",
-    "tests/hil/test_e2e_centroid.py",
-    "tests/hil/test_e2e_qualisys.py",
-)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """With pytest-xdist (``make test`` runs two workers, ``--dist loadgroup``), the
-    end-to-end tests go in two groups, each run by one worker in turn (:data:`HEAVY`
-    and the rest of :data:`REAL_TIME`); the other tests fill both workers."""
+    end-to-end tests, whose simulators run in real time, go to one worker one after
+    another, so that two of them never share the machine's two cores; the other tests
+    share both workers."""
     for item in items:
-        if item.nodeid.startswith(HEAVY):
-            item.add_marker(pytest.mark.xdist_group("real-time-heavy"))
-        elif item.nodeid.startswith(REAL_TIME):
+        if item.nodeid.startswith(REAL_TIME):
             item.add_marker(pytest.mark.xdist_group("real-time"))
 
 

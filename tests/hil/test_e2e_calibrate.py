@@ -46,7 +46,7 @@ class Recordings:
     trial_truth: Path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def recordings(tmp_path_factory: pytest.TempPathFactory) -> Recordings:
     """A wand dance (markers 1, 2), a static L-frame (markers 1-4, its coordinates written
     by the simulator) and a held-out gait trial, recorded at once."""

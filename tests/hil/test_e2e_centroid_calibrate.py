@@ -75,7 +75,7 @@ def _record(folder: Path, out: Path, seconds: float, rate: float, *sim_args: obj
         stop_process(sim)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Lab:
     """One scene after the other (three simulators at once starve on a busy machine); the
     cameras stay put between them, each simulator has its own seed (its own trial)."""
@@ -100,7 +100,7 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Lab:
     return lab
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def calibrated(lab: Lab) -> tuple[Path, dict[str, object]]:
     """The rig ``spotlab calibrate`` makes of the wand and L-frame recordings, and its
     JSON report."""

@@ -37,7 +37,7 @@ class Run:
     model: Path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     folder = tmp_path_factory.mktemp("centroid-reconstruct")
     r = Run(

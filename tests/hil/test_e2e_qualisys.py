@@ -179,7 +179,7 @@ def check_clock_drift(run: LabRun) -> None:
     assert np.max(np.abs(t_sess - fit)) < 2e-6
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def lab_run(tmp_path_factory: pytest.TempPathFactory) -> LabRun:
     return _session(tmp_path_factory.mktemp("qtm-lab"), 8.0)
 
