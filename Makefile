@@ -34,10 +34,9 @@ typecheck: $(STAMP)
 layers: $(STAMP)
 	LINT_IMPORTS=$(CURDIR)/$(BIN)/lint-imports tools/lint_layers.sh
 
-# Two workers (pytest-xdist); the end-to-end tests, whose simulators run in real time,
-# stay on one of them, one after another (tests/conftest.py puts them in one group).
+# Two workers (pytest-xdist), the tests spread over both.
 unit: $(STAMP)
-	$(BIN)/python -m pytest -m "not long" -n 2 --dist loadgroup
+	$(BIN)/python -m pytest -m "not long" -n 2
 
 # The 30-60 s versions of end-to-end runs (make test runs them at 8-10 s).
 long: $(STAMP)

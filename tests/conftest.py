@@ -41,23 +41,6 @@ def _children() -> set[int]:
     return kids
 
 
-#: Tests whose simulators run in real time (the end-to-end runs, the console on its
-#: simulated lab): one xdist worker takes them all, one after another. Their recordings
-#: are session fixtures: xdist does not keep a module's tests together, and a module
-#: fixture would be recorded again each time the worker came back to its module.
-REAL_TIME = ("tests/hil/", "tests/browser/", "tests/unit/console/test_console_web.py")
-
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """With pytest-xdist (``make test`` runs two workers, ``--dist loadgroup``), the
-    end-to-end tests, whose simulators run in real time, go to one worker one after
-    another, so that two of them never share the machine's two cores; the other tests
-    share both workers."""
-    for item in items:
-        if item.nodeid.startswith(REAL_TIME):
-            item.add_marker(pytest.mark.xdist_group("real-time"))
-
-
 @pytest.fixture(autouse=True)
 def no_leaks() -> Iterator[None]:
     """Fail a test that leaves a thread, a child process or an open port behind."""
