@@ -24,6 +24,7 @@ carry it to :func:`fit_edges`, which finds it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -196,10 +197,26 @@ def _arrival_times(
     host = host_times(frames.ticks, frames.arrival_ns, spec.tick_hz, spec.rate_hz) - span
     res = dejitter_arrivals(frames.ticks, host, spec.tick_hz, allow_resets=True)
     times = to_session(res.model(frames.ticks))
+    if not _increasing_within_epochs(frames.ticks, times):
+        # A step found in the arrivals alone can be a burst of late deliveries (a busy
+        # host, a device whose frames waited in its port): the segments' lines then
+        # disagree and frame times would run backwards. One line per epoch instead.
+        res = dejitter_arrivals(frames.ticks, host, spec.tick_hz, k=math.inf, allow_resets=True)
+        times = to_session(res.model(frames.ticks))
+        notes.append(
+            "the clock steps seen in the arrival stamps made frame times run backwards: "
+            "one line per clock epoch instead"
+        )
     return StreamTiming(
         frames.name, frames.seq, frames.ticks, np.asarray(times, dtype=np.float64), method,
         model=res.model, notes=notes, spec=spec,
     )  # fmt: skip
+
+
+def _increasing_within_epochs(ticks: npt.NDArray[np.int64], times: F64) -> bool:
+    """Whether ``times`` increase wherever ``ticks`` do (a tick reset starts a new epoch)."""
+    forward = np.diff(ticks) > 0
+    return bool(np.all(np.diff(times)[forward] > 0))
 
 
 def _edge_times(dev: PulsedDevice, edges: ChannelEdges, channel: int, origin: int) -> StreamTiming:

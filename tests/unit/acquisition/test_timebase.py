@@ -140,3 +140,19 @@ def test_no_timer_gives_host_times_and_a_note() -> None:
     assert any("no timer stream" in n for n in out.notes)
     assert any("ignored" in n for n in out.notes)
     assert np.all(np.diff(out.streams["a"].time_s) > 0)
+
+
+def test_a_device_catching_up_never_runs_frame_times_backwards() -> None:
+    # An in-process simulator starved at start-up (a console trial under load,
+    # 2026-11-25) delivers its backlog in bursts: arrivals wander by +-0.1 s about the
+    # ticks and gain 0.8 s over 5.8 s. The steps the arrival fit saw in that made its
+    # segments' lines cross: frame times ran back by 0.22 s and the export failed.
+    rng = np.random.default_rng(19)
+    t = 5.0 + np.arange(584) / RATE
+    a = device("a", t, 3.0, 0, rng)
+    wander = np.cumsum(rng.normal(0.0, 0.012, t.shape)) - 0.14 * (t - t[0])
+    arrival = a.arrival_ns + np.round(wander * 1e9).astype(np.int64)
+    a = DeviceFrames("a", a.seq, a.ticks, arrival, a.spec)
+    out = session_timebase([a], None, {})
+    assert np.all(np.diff(out.streams["a"].time_s) > 0)
+    assert any("one line per clock epoch" in n for n in out.streams["a"].notes)
