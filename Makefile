@@ -34,9 +34,10 @@ typecheck: $(STAMP)
 layers: $(STAMP)
 	LINT_IMPORTS=$(CURDIR)/$(BIN)/lint-imports tools/lint_layers.sh
 
-# Two workers (pytest-xdist), the tests spread over both.
+# Two workers (pytest-xdist), the tests spread over both; a module marked with an
+# xdist_group runs on one worker, so its session-scoped recordings are made once.
 unit: $(STAMP)
-	$(BIN)/python -m pytest -m "not long" -n 2
+	$(BIN)/python -m pytest -m "not long" -n 2 --dist loadgroup
 
 # The 30-60 s versions of end-to-end runs (make test runs them at 8-10 s).
 long: $(STAMP)

@@ -32,7 +32,8 @@ WAND_LENGTH_MM = 500.0
 GAIT_LEDS = 19
 
 # A 20 s dance through ptys, then calibrations of 2000 frames on a shared machine.
-pytestmark = pytest.mark.timeout(300)
+# one worker runs this module, so its session recordings are made once (make test: --dist loadgroup)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.xdist_group("selspot-calibration")]
 
 
 @dataclass

@@ -32,6 +32,9 @@ from spotlab.io import read_c3d
 from spotlab.processing.blob_trajectories import read_blob_recording
 from spotlab.reconstruction import triangulate
 
+# one worker runs this module, so its session recordings are made once (make test: --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("centroid-lab")
+
 CAMERAS, WAND_LENGTH_MM = 8, 500.0
 WAND_S, FRAME_S, WALK_S = 15.0, 5.0, 3.0
 STATIC_S, ROM_S = 2.0, 6.0

@@ -23,6 +23,9 @@ from spotlab.geometry import Rig
 from spotlab.hil.labelling import truth_of_frames
 from spotlab.io import read_c3d
 
+# one worker runs this module, so its session recordings are made once (make test: --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("centroid-reconstruct")
+
 CAMERAS, MARKERS, RATE_HZ, SECONDS = 8, 40, 300, 3
 FloatArray = NDArray[np.float64]
 

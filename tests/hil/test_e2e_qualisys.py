@@ -34,6 +34,9 @@ from spotlab.core.frames import FrameBlock
 from spotlab.io import read_c3d
 from spotlab.processing.decoding import decoder_for
 
+# one worker runs this module, so its session recordings are made once (make test: --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("qualisys-recording")
+
 RATE_HZ = 300.0
 DRIFT_PPM = 150.0
 LSL_NAME = "spotlab-e2e-qualisys-emg"
