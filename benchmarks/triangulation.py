@@ -7,7 +7,10 @@ that see it, 0.2 px Gaussian noise per coordinate. The noise floor is the
 maximum-likelihood point (Gauss-Newton on the pixel error until it stops moving,
 ``triangulate(..., refine=3)``); ``ratio_to_floor`` is a method's RMS 3-D error over it.
 
-Peers, on the same observations: aniposelib ``CameraGroup.triangulate`` (all views,
+Peers, on the same observations: a plain normalised DLT in numpy (every view of a
+point, undistorted by OpenCV, one batched SVD of the stacked 2k x 4 systems; the
+``x_numpy_dlt`` of each spotlab row is its speed over this one's, same run, same
+repeats), aniposelib ``CameraGroup.triangulate`` (all views,
 undistorted by OpenCV inside), and OpenCV ``cv2.triangulatePoints`` on the first two
 views of each point after ``cv2.undistortPoints`` (it takes exactly two cameras). A
 missing peer is reported as skipped. Times are the best of ``--repeats`` runs. The default
@@ -120,6 +123,30 @@ def opencv_peer(rig: Rig) -> Callable[[np.ndarray], np.ndarray] | str:
     return run
 
 
+def numpy_dlt_peer(rig: Rig) -> Callable[[np.ndarray], np.ndarray] | str:
+    try:
+        import cv2
+    except ImportError as exc:
+        return f"OpenCV not installed ({exc})"
+    Rt = np.stack([np.column_stack([cam.R, cam.t]) for cam in rig])  # (C, 3, 4)
+
+    def run(uv: np.ndarray) -> np.ndarray:
+        seen = np.all(np.isfinite(uv), axis=-1)  # (C, N)
+        xy = np.zeros(uv.shape)
+        for c, cam in enumerate(rig):
+            pts = uv[c, seen[c]].reshape(-1, 1, 2)
+            xy[c, seen[c]] = cv2.undistortPoints(pts, cam.K, cam.dist).reshape(-1, 2)
+        # rows x P3 - P1 and y P3 - P2 of each view; an unseen view's rows are zero
+        w = seen[..., None].astype(np.float64)
+        rows_x = (xy[..., 0:1] * Rt[:, None, 2] - Rt[:, None, 0]) * w  # (C, N, 4)
+        rows_y = (xy[..., 1:2] * Rt[:, None, 2] - Rt[:, None, 1]) * w
+        A = np.concatenate([rows_x, rows_y]).transpose(1, 0, 2)  # (N, 2C, 4)
+        h = np.linalg.svd(A)[2][:, -1]  # (N, 4)
+        return h[:, :3] / h[:, 3:]
+
+    return run
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=100_000)
@@ -143,15 +170,19 @@ def main(argv: list[str] | None = None) -> int:
         ("spotlab", "dlt", lambda a: triangulate(rig, a, "dlt")),
         ("spotlab", "dlt_plain", lambda a: triangulate(rig, a, "dlt", iterations=0)),
         ("spotlab", "odle_refine2", lambda a: triangulate(rig, a, refine=2)),
+        ("numpy", "dlt_normalised_all_views", numpy_dlt_peer(rig)),
         ("aniposelib", "triangulate_all_views", aniposelib_peer(rig)),
         ("opencv", "triangulatePoints_2_views", opencv_peer(rig)),
     ]
+    rows: list[dict[str, Any]] = []
     for tool, method, fn in runs:
         row: dict[str, Any] = {**head, "tool": tool, "method": method}
+        rows.append(row)
         if isinstance(fn, str):
             row["skipped"] = fn
         else:
-            repeats = args.repeats if tool == "spotlab" else max(1, min(args.repeats, 2))
+            slow_peer = tool not in ("spotlab", "numpy")
+            repeats = max(1, min(args.repeats, 2)) if slow_peer else args.repeats
             seconds, estimate = best_time(lambda fn=fn: fn(uv), repeats)
             err = rms_mm(estimate, X)
             row.update(
@@ -161,6 +192,10 @@ def main(argv: list[str] | None = None) -> int:
                 ratio_to_floor=round(err / floor, 4),
                 reconstructed=int(np.all(np.isfinite(estimate), axis=-1).sum()),
             )
+    peer = next((r for r in rows if r["tool"] == "numpy" and "seconds" in r), None)
+    for row in rows:
+        if peer is not None and row["tool"] == "spotlab" and "seconds" in row:
+            row["x_numpy_dlt"] = round(peer["seconds"] / row["seconds"], 2)
         print(json.dumps(row), flush=True)
     return 0
 
