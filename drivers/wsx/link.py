@@ -92,10 +92,13 @@ class SocketBackend(usb.backend.IBackend):
         super().__init__()
         self.host, self.port, self.timeout = host, port, timeout
         self._sock: socket.socket | None = None
+        self._closed = False
         self._lock = threading.Lock()
 
     # -- the socket --------------------------------------------------------------------
     def _connect(self) -> socket.socket:
+        if self._closed:
+            raise usb.core.USBError("the WSX simulator link is closed", -4, errno.ENODEV)
         if self._sock is None:
             try:
                 sock = socket.create_connection((self.host, self.port), timeout=self.timeout)
@@ -134,7 +137,8 @@ class SocketBackend(usb.backend.IBackend):
         return bytes(buf)
 
     def close(self) -> None:
-        """Close the socket (the next call connects again)."""
+        """Close the socket for good (a new backend connects again)."""
+        self._closed = True
         if self._sock is not None:
             try:
                 self._sock.close()

@@ -135,6 +135,9 @@ def open_hub(target: Target, name: str) -> tuple[Any, str]:
         _close_backend(backend)
         raise DeviceNotFound(f"{name}: no WSX hub at {target.where()}: {exc}") from None
     match = [(d, s) for d, s in devs if not target.serial or s == target.serial]
+    for d, _ in devs:  # release the handles opened to read serial numbers
+        if not match or d is not match[0][0]:
+            usb.util.dispose_resources(d)
     if not match:
         _close_backend(backend)
         serial = f" with serial {target.serial}" if target.serial else ""
