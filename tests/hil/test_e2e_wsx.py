@@ -75,6 +75,7 @@ def test_unknown_vid_pid_is_one_clear_line(
 
 
 @pytest.mark.long
+@pytest.mark.timeout(400)
 def test_three_sensors_24_markers_at_the_highest_rate_for_60_s(tmp_path: Path) -> None:
     journal = tmp_path / "long.spj"
     sim_args = ("--sensors", "3", "--markers", "24", "--marker-rate", "4600", "--seed", "11")
