@@ -325,10 +325,6 @@ class WsxDevice:
                 self._produce(now)
             self.streaming = False
             return 0, b""
-        if request in (w.REQ_INFO, w.REQ_GET_SETUP, w.REQ_STATUS, w.REQ_CALIBRATION):
-            return self._refuse(w.E_UNKNOWN)
-        if request in (w.REQ_SET_SETUP, w.REQ_START, w.REQ_STOP):
-            return self._refuse(w.E_UNKNOWN)
         return self._refuse(w.E_UNKNOWN)
 
     def clear_halt(self, generation: int, endpoint: int) -> int:

@@ -271,7 +271,8 @@ class WsxDriver(Driver):
         self._decoder.feed(data, time.monotonic_ns())
 
     def _check_silence(self) -> None:
-        if not self._silent and time.monotonic() - self._last_frame > self.silence_timeout:
+        limit = max(self.silence_timeout, 3.0 / self.spec.rate_hz)
+        if not self._silent and time.monotonic() - self._last_frame > limit:
             self._silent = True
             self.usb_faults["timeouts"] += 1
             self._tap_event("error", fault="timeout", seconds=self.silence_timeout)
