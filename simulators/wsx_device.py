@@ -89,6 +89,8 @@ class WsxDevice:
     faults : list of Fault, optional
     clock : callable
         Host monotonic ns (tests may pass their own).
+    registered : bool
+        Factory calibration in the device frame (True) or each sensor's own (False).
     """
 
     def __init__(
@@ -98,8 +100,10 @@ class WsxDevice:
         setup: w.Setup,
         faults: list[Fault] | None = None,
         clock: Callable[[], int] = time.monotonic_ns,
+        registered: bool = True,
     ) -> None:
         self.scene, self.serial, self.default_setup = scene, serial, setup
+        self.registered = registered
         self.faults = faults or []
         self.clock = clock
         self.lock = threading.RLock()
@@ -295,7 +299,7 @@ class WsxDevice:
         if request == w.REQ_CALIBRATION and is_in:
             if not 0 <= index < self.scene.n_sensors:
                 return self._refuse(w.E_SENSOR)
-            return 0, self.scene.calibration_record(index)
+            return 0, self.scene.calibration_record(index, self.registered)
         if request == w.REQ_SET_SETUP and not is_in:
             if self.streaming:
                 return self._refuse(w.E_BUSY)

@@ -57,6 +57,8 @@ class CcdGeometry:
         Principal distance and point (px).
     axis : ndarray of int, shape (C,)
         Measured axis (0 x, 1 y).
+    sensor_R, sensor_eye : ndarray, shape (S, 3, 3) and (S, 3)
+        Each position sensor's body frame: ``Y = sensor_R (X - sensor_eye)``.
     """
 
     R: F64
@@ -64,16 +66,20 @@ class CcdGeometry:
     focal: F64
     principal: F64
     axis: I64
+    sensor_R: F64
+    sensor_eye: F64
 
 
 def sensor_geometry(n_sensors: int, seed: int) -> CcdGeometry:
     """The CCDs of ``n_sensors`` position sensors around the volume."""
     rng = np.random.default_rng(seed + 7919)
-    Rs, ts, f, r0, ax = [], [], [], [], []
+    Rs, ts, f, r0, ax, bodies, eyes = [], [], [], [], [], [], []
     for s in range(n_sensors):
         phi = 2 * np.pi * s / max(n_sensors, 1) + 0.3
         eye = np.array([RADIUS_MM * np.cos(phi), RADIUS_MM * np.sin(phi), HEIGHT_MM])
         R_s = _look_at(eye, CENTRE)
+        bodies.append(R_s)
+        eyes.append(eye)
         for c, (dx, toe, axis) in enumerate(
             ((-HALF_BASE_MM, -TOE_DEG, 0), (0.0, 0.0, 1), (HALF_BASE_MM, TOE_DEG, 0))
         ):
@@ -86,8 +92,9 @@ def sensor_geometry(n_sensors: int, seed: int) -> CcdGeometry:
             ax.append(axis)
             del c
     return CcdGeometry(
-        np.array(Rs), np.array(ts), np.array(f), np.array(r0), np.array(ax, dtype=np.int64)
-    )
+        np.array(Rs), np.array(ts), np.array(f), np.array(r0), np.array(ax, dtype=np.int64),
+        np.array(bodies), np.array(eyes),
+    )  # fmt: skip
 
 
 def body_points(n_markers: int, seed: int) -> F64:
@@ -208,10 +215,15 @@ class WsxScene:
             code.reshape(F, M, S, w.CCDS),
         )
 
-    def calibration_record(self, sensor: int) -> bytes:
-        """The factory calibration of one position sensor (wsx.md §4.4)."""
+    def calibration_record(self, sensor: int, registered: bool = True) -> bytes:
+        """The factory calibration of one position sensor (wsx.md §4.4): its CCDs in the
+        device frame, or (``registered`` false) in the sensor's own body frame."""
         g = self.geometry
         sl = slice(3 * sensor, 3 * sensor + 3)
+        R, t = g.R[sl], g.t[sl]
+        if not registered:  # X = B' Y + eye: x = R B' Y + (R eye + t)
+            B, eye = g.sensor_R[sensor], g.sensor_eye[sensor]
+            R, t = R @ B.T, np.einsum("cij,j->ci", R, eye) + t
         return w.encode_calibration(
-            sensor, g.axis[sl], g.focal[sl], g.principal[sl], g.R[sl], g.t[sl]
+            sensor, g.axis[sl], g.focal[sl], g.principal[sl], R, t, frame=0 if registered else 1
         )

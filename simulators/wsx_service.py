@@ -33,6 +33,7 @@ class WsxSimOptions:
     seed: int = 0
     serial: str = "WSX00042"
     faults: str = ""
+    registered: bool = True
 
     def validate(self) -> None:
         """Raise ValueError for what the device could not be built with."""
@@ -66,7 +67,10 @@ def build_device(options: WsxSimOptions) -> WsxDevice:
     """The simulated hub of ``options``."""
     options.validate()
     scene = WsxScene(options.sensors, options.markers, options.seed)
-    return WsxDevice(scene, options.serial, options.setup(), parse_faults(options.faults))
+    return WsxDevice(
+        scene, options.serial, options.setup(), parse_faults(options.faults),
+        registered=options.registered,
+    )  # fmt: skip
 
 
 def write_truth(device: WsxDevice, path: Path) -> None:

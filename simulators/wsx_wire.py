@@ -123,9 +123,11 @@ def encode_calibration(
     principal: Sequence[float],
     rotations: NDArray[np.float64],
     translations: NDArray[np.float64],
+    frame: int = 0,
 ) -> bytes:
-    """A position sensor's factory calibration record (§4.4): three CCDs."""
-    out = bytearray(CAL_HEADER.pack(sensor, CCDS, CAL_CCD.size, b"\0" * 4))
+    """A position sensor's factory calibration record (§4.4): three CCDs, in the device
+    frame (``frame`` 0) or the sensor's own (1)."""
+    out = bytearray(CAL_HEADER.pack(sensor, CCDS, CAL_CCD.size, bytes([frame, 0, 0, 0])))
     for c in range(CCDS):
         out += CAL_CCD.pack(
             c, int(axes[c]), 0, 0, float(focal[c]), float(principal[c]),

@@ -153,12 +153,14 @@ class Status:
 def parse_calibration(data: bytes, sensor: int) -> list[dict[str, Any]]:
     """The three CCDs of one position sensor's factory calibration (§4.4), JSON-safe.
 
-    Each CCD: ``axis`` (0 x, 1 y), ``focal`` and ``principal`` (px), ``R`` (3 x 3,
-    world -> CCD) and ``t`` (mm), as the device stores them (float32).
+    Each CCD: ``frame`` (``device``: registered at the factory; ``sensor``: in the
+    position sensor's own frame), ``axis`` (0 x, 1 y), ``focal`` and ``principal`` (px),
+    ``R`` (3 x 3, frame -> CCD) and ``t`` (mm), as the device stores them (float32).
     """
     if len(data) < _CAL_HEADER.size:
         raise ProtocolError(f"WSX calibration of sensor {sensor}: {len(data)} bytes")
-    s, n, size, _ = _CAL_HEADER.unpack_from(data)
+    s, n, size, rest = _CAL_HEADER.unpack_from(data)
+    frame = "device" if rest[0] == 0 else "sensor"
     if s != sensor or n != CCDS or size != _CAL_CCD.size:
         raise ProtocolError(f"WSX calibration of sensor {sensor}: bad header {data[:4].hex()}")
     if len(data) != _CAL_HEADER.size + n * size:
@@ -169,7 +171,8 @@ def parse_calibration(data: bytes, sensor: int) -> list[dict[str, Any]]:
         if v[0] != c or v[1] not in (0, 1):
             raise ProtocolError(f"WSX calibration of sensor {sensor}: bad CCD record {c}")
         out.append({
-            "sensor": sensor, "ccd": c, "axis": v[1], "focal": v[3], "principal": v[4],
+            "sensor": sensor, "ccd": c, "frame": frame, "axis": v[1], "focal": v[3],
+            "principal": v[4],
             "R": [list(v[5:8]), list(v[8:11]), list(v[11:14])], "t": list(v[14:17]),
         })  # fmt: skip
     return out

@@ -25,7 +25,11 @@ from spotlab.io import Trial
 from spotlab.io.journal import JournalReader
 from spotlab.processing.decoding import decoder_for, input_suffix
 from spotlab.processing.errors import InputError
-from spotlab.reconstruction.linear_sensors import LinearSensorCalibration, markers_from_readings
+from spotlab.reconstruction.linear_sensors import (
+    LinearSensorCalibration,
+    markers_from_readings,
+    register_sensors,
+)
 
 KIND = "linear1d"
 F64 = NDArray[np.float64]
@@ -50,6 +54,9 @@ class LinearRecording:
     stream : str
     first_seq : int
         The ``seq`` of row 0.
+    registration_rms : list of float or None
+        When the hub's sensors were calibrated each in its own frame: the RMS (mm) of
+        each sensor's registration to the first (the frame is then the first sensor's).
     """
 
     readings: F64
@@ -60,6 +67,7 @@ class LinearRecording:
     interpolate: bool
     stream: str
     first_seq: int
+    registration_rms: list[float] | None = None
 
 
 def _is_wsx(meta: Any) -> bool:
@@ -131,9 +139,17 @@ def read_linear_recording(path: Path, stream: str | None = None) -> LinearRecord
     start = np.full(n, np.nan)
     start[k] = ticks
     interpolate = bool(meta.get("interpolate", True)) and not np.any(status & 0x0001)
+    registration = None
+    if any(r.get("frame") == "sensor" for r in meta["calibration"]):
+        try:
+            reg = register_sensors(readings, cal)
+        except ReconstructionError as exc:
+            raise InputError(f"{path}: {exc}") from None
+        cal, registration = reg.calibration, reg.rms
     return LinearRecording(
-        readings, fire, start, float(spec["rate_hz"]), cal, interpolate, stream, int(seq[0])
-    )
+        readings, fire, start, float(spec["rate_hz"]), cal, interpolate, stream, int(seq[0]),
+        registration,
+    )  # fmt: skip
 
 
 def to_frame_instants(points: F64, fire_ns: F64, start_ns: F64, rate_hz: float) -> F64:
@@ -204,5 +220,7 @@ def linear_trial(rec: LinearRecording, raw: bool = False) -> tuple[Trial, dict[s
     summary = {
         "stream": rec.stream, "frames": int(points.shape[0]), "ccds": rec.calibration.n_ccds,
         "interpolated": interpolated, "markers": markers,
+        "registration_rms_mm": None if rec.registration_rms is None
+        else [round(v, 4) for v in rec.registration_rms],
     }  # fmt: skip
     return trial, summary

@@ -17,10 +17,16 @@ from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction.planes import PlaneIntersection, intersect_planes, linear_sensor_plane
+from spotlab.reconstruction.rigid import rigid_pose
 
 F64 = NDArray[np.float64]
 
-__all__ = ["LinearSensorCalibration", "markers_from_readings"]
+__all__ = [
+    "LinearSensorCalibration",
+    "SensorRegistration",
+    "markers_from_readings",
+    "register_sensors",
+]
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,88 @@ class LinearSensorCalibration:
     @property
     def n_ccds(self) -> int:
         return int(self.focal.shape[0])
+
+    def subset(self, ccds: Any) -> LinearSensorCalibration:
+        """The calibration of some CCDs (an index array or slice)."""
+        return LinearSensorCalibration(
+            self.R[ccds], self.t[ccds], self.focal[ccds], self.principal[ccds], self.axis[ccds]
+        )
+
+    def moved(self, ccds: Any, R: F64, t: F64) -> LinearSensorCalibration:
+        """The calibration with the frame of ``ccds`` changed by ``Y0 = R Y + t``."""
+        Rc, tc = self.R.copy(), self.t.copy()
+        Rc[ccds] = self.R[ccds] @ R.T
+        tc[ccds] = self.t[ccds] - np.einsum("cij,j->ci", Rc[ccds], t)
+        return LinearSensorCalibration(Rc, tc, self.focal, self.principal, self.axis)
+
+
+@dataclass(frozen=True)
+class SensorRegistration:
+    """Position sensors registered to the first one with the markers they share.
+
+    Attributes
+    ----------
+    calibration : LinearSensorCalibration
+        Every CCD in the first sensor's frame.
+    rms : list of float
+        Per sensor, the RMS distance (mm) of its own marker positions from the first
+        sensor's after registration (0 for the first).
+    points : list of int
+        Marker samples each registration used.
+    """
+
+    calibration: LinearSensorCalibration
+    rms: list[float]
+    points: list[int]
+
+
+def register_sensors(
+    readings: Any, calibration: LinearSensorCalibration, ccds_per_sensor: int = 3
+) -> SensorRegistration:
+    """Register position sensors calibrated each in its own frame, with a shared rigid object.
+
+    Each position sensor's three CCDs fix a marker alone; the markers one sensor sees
+    and the first sensor sees at the same firing instants are one rigid object in two
+    frames, and the least-squares rigid motion between them (:func:`rigid_pose`)
+    carries that sensor's CCDs into the first sensor's frame.
+
+    Parameters
+    ----------
+    readings : array_like, shape (..., C)
+        Readings (px) of every CCD, NaN where missing; C = ``ccds_per_sensor`` x S.
+    calibration : LinearSensorCalibration
+        Every CCD in its own sensor's frame.
+
+    Raises
+    ------
+    ReconstructionError
+        If a sensor shares fewer than 3 marker samples with the first, or they are
+        collinear.
+    """
+    r = np.asarray(readings, dtype=np.float64).reshape(-1, calibration.n_ccds)
+    k = ccds_per_sensor
+    n_sensors = calibration.n_ccds // k
+    own = [
+        markers_from_readings(
+            r[:, s * k : (s + 1) * k], calibration.subset(slice(s * k, (s + 1) * k))
+        ).points
+        for s in range(n_sensors)
+    ]
+    cal, rms, used = calibration, [0.0], [int(np.isfinite(own[0]).all(-1).sum())]
+    for s in range(1, n_sensors):
+        both = np.isfinite(own[0]).all(-1) & np.isfinite(own[s]).all(-1)
+        if both.sum() < 3:
+            raise ReconstructionError(
+                f"position sensor {s} shares {int(both.sum())} marker samples with sensor 0: "
+                "at least 3 (not collinear) are needed to register it"
+            )
+        pose = rigid_pose(own[s][both], own[0][both][None])
+        if not pose.valid[0]:
+            raise ReconstructionError(f"position sensor {s}: the shared markers are collinear")
+        cal = cal.moved(slice(s * k, (s + 1) * k), pose.R[0], pose.t[0])
+        rms.append(float(pose.rms[0]))
+        used.append(int(both.sum()))
+    return SensorRegistration(cal, rms, used)
 
 
 def markers_from_readings(

@@ -15,6 +15,7 @@ import numpy as np
 
 from spotlab.processing.linear_trajectories import LinearRecording, linear_points
 from spotlab.reconstruction.linear_sensors import LinearSensorCalibration
+from spotlab.reconstruction.rigid import rigid_pose
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,11 @@ def score_recording(rec: LinearRecording, truth_path: Path) -> WsxScore:
         )
     )  # fmt: skip
     both = np.isfinite(got[have]).all(-1) & np.isfinite(floor[have]).all(-1)
-    e1 = np.linalg.norm(got[have] - expect, axis=-1)[both]
+    got = got[have]
+    if rec.registration_rms is not None:  # in the first sensor's frame: align to the truth's
+        pose = rigid_pose(got[both], expect[both][None])
+        got = np.einsum("ij,...j->...i", pose.R[0], got) + pose.t[0]
+    e1 = np.linalg.norm(got - expect, axis=-1)[both]
     e0 = np.linalg.norm(floor[have] - expect, axis=-1)[both]
     return WsxScore(
         float(np.sqrt(np.mean(e1**2))), float(np.sqrt(np.mean(e0**2))),

@@ -149,6 +149,9 @@ def _run_linear(args: argparse.Namespace) -> int:
         return 0
     how = "interpolated to each frame's start" if summary["interpolated"] else "at firing instants"
     print(f"wsx {summary['stream']}: {summary['frames']} frames, {summary['ccds']} CCDs, {how}")
+    if summary["registration_rms_mm"] is not None:
+        rms = ", ".join(f"{v:.3f}" for v in summary["registration_rms_mm"][1:])
+        print(f"  sensors registered to sensor 0 by the markers they share (RMS {rms} mm)")
     for m in summary["markers"]:
         rms = "-" if m["plane_rms_mm"] is None else f"{m['plane_rms_mm']:.3f}"
         print(f"  {m['label']:<4} {m['frames']:>7} frames   plane RMS {rms} mm")

@@ -21,6 +21,11 @@ def add_arguments(p: Any) -> None:
         "--marker-rate", type=float, default=2500.0, metavar="HZ",
         help="wsx: marker rate after power-up, 1500-4600 Hz (default 2500)",
     )  # fmt: skip
+    g.add_argument(
+        "--unregistered", action="store_true",
+        help="wsx: the factory calibration gives each position sensor's CCDs in the sensor's "
+        "own frame; spotlab reconstruct registers the sensors with the markers they share",
+    )  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         rate_hz=args.rate if getattr(args, "rate_given", False) else None,
         seed=args.seed,
         faults=args.faults,
+        registered=not args.unregistered,
     )
     try:
         options.validate()
