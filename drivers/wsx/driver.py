@@ -197,6 +197,7 @@ class WsxDriver(Driver):
     def _configure(self, setup: Setup) -> Setup:
         """Send ``setup``; a stall is the device refusing it: raise with its reason."""
         try:
+            self._tap_tx(setup.encode(), time.monotonic_ns())
             self.dev.ctrl_transfer(0x40, SET_SETUP, 0, 0, setup.encode(), 1000)
         except usb.core.USBError as exc:
             if exc.errno != errno.EPIPE:
