@@ -120,3 +120,18 @@ def test_link_statuses_become_pyusb_errors(status: int, errno_: int) -> None:
     with pytest.raises(usb.core.USBTimeoutError):
         raise_status(-7)
     assert raise_status(12) == 12
+
+
+def test_mutated_bytes_never_raise() -> None:
+    rng = np.random.default_rng(0)
+    good = _golden("Event") + _golden("Frame") * 3
+    dec = WsxDecoder(2, 1)
+    for _ in range(2000):
+        data = bytearray(good)
+        for i in rng.integers(0, len(data), size=rng.integers(1, 6)):
+            data[i] = int(rng.integers(0, 256))
+        cut = int(rng.integers(0, len(data)))
+        for part in (bytes(data[:cut]), bytes(data[cut:])):
+            block = dec.feed(part, 0)
+            assert block.data.shape[1:] == (2, 3, 3)
+        dec.mark_discontinuity()
