@@ -49,6 +49,12 @@ def test_record_info_and_reconstruct_out_of_process(
         err = capsys.readouterr().err
         assert err.count(ERROR) == 1 and "Traceback" not in err
         assert "refused the set-up" in err and "error 0x24" in err
+        raw = tmp_path / "raw.spj"
+        assert main(["record", "--device", f"{device},raw=1", "--seconds", "0.5",
+                     "--out", str(raw)]) == 0  # fmt: skip
+        capsys.readouterr()
+        assert main(["reconstruct", str(raw), "--out", str(tmp_path / "raw.c3d"), "--json"]) == 0
+        assert not json.loads(capsys.readouterr().out.strip().splitlines()[-1])["interpolated"]
     assert main(["info", str(journal)]) == 0
     assert "wsx:" in capsys.readouterr().out
     assert main(["reconstruct", str(journal), "--out", str(c3d), "--json"]) == 0
