@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	@# PYTHONWARNINGS: setuptools' build backend warns about every editable install
-	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,lsl,oak,console]'
+	PYTHONWARNINGS=ignore $(BIN)/python -m pip install --quiet -e '.[dev,lsl,oak,console,usb]'
 	@# The browser tests of the console (tests/browser) drive Debian's chromium.
 	@if [ ! -x /usr/bin/chromium ]; then \
 		if [ "$$(id -u)" = 0 ]; then apt-get install -y chromium || \

@@ -23,6 +23,7 @@ DRIVERS: dict[str, tuple[str, str]] = {
     "oak": ("spotlab.drivers.oak", "OakDriver"),
     "qualisys": ("spotlab.drivers.qualisys", "QualisysDriver"),
     "natnet": ("spotlab.drivers.natnet", "NatNetDriver"),
+    "wsx": ("spotlab.drivers.wsx", "WsxDriver"),
 }
 
 

@@ -28,6 +28,7 @@ SUITES: dict[str, tuple[str, str]] = {
     "coda": ("spotlab.testing.family_conformance", "CodaConformance"),
     "qualisys": ("spotlab.testing.qualisys_conformance", "QualisysConformance"),
     "natnet": ("spotlab.testing.natnet_conformance", "NatNetConformance"),
+    "wsx": ("spotlab.testing.wsx_conformance", "WsxConformance"),
 }
 
 #: Extra fixtures a suite needs from its test module (the NatNet suite's address).
@@ -37,6 +38,13 @@ _FIXTURES: dict[str, str] = {
 @pytest.fixture
 def natnet_address(request: pytest.FixtureRequest) -> str:
     return hardware_ports(request.config)["natnet"]
+""",
+    "wsx": """
+
+@pytest.fixture
+def wsx_port(request: pytest.FixtureRequest) -> str:
+    port = hardware_ports(request.config)["wsx"]
+    return port if ":" in port else f"usb:{port}"
 """,
 }
 

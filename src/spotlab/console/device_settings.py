@@ -48,6 +48,21 @@ def _markers(value: SettingValue) -> int | str:
     return _int(value)
 
 
+def _bool(value: SettingValue) -> bool:
+    """``1/0``, ``on/off``, ``yes/no``, ``true/false``."""
+    text = str(value).lower()
+    if text in ("1", "on", "yes", "true"):
+        return True
+    if text in ("0", "off", "no", "false"):
+        return False
+    raise ValueError(value)
+
+
+def _ports(value: SettingValue) -> str:
+    """Markers per strober port, ``8+8+8`` (commas part settings)."""
+    return str(value)
+
+
 Converter = Callable[[SettingValue], Any]
 
 #: Family -> setting key -> (driver keyword, converter, help text).
@@ -84,6 +99,17 @@ FAMILY_SETTINGS: dict[str, dict[str, tuple[str, Converter, str]]] = {
     "qualisys": {
         "password": ("password", str, "QTM's real-time password (TakeControl)"),
         "udp": ("udp_port", _int, "have QTM send the frames by UDP to this local port (0: any)"),
+    },
+    "wsx": {
+        "rate": ("rate_hz", _float, "frame rate in Hz, at most marker rate / (markers + 2)"),
+        "markers": ("markers", _int, "markers, 1-512"),
+        "marker_rate": ("marker_rate_hz", _float, "marker rate in Hz, 1500-4600"),
+        "ports": ("ports", _ports, "markers per strober port, 8+8+8"),
+        "duty": ("duty", _float, "duty cycle, 0.10-0.85"),
+        "threshold": ("threshold", _int, "threshold, 1-255"),
+        "gain": ("gain", _int, "gain, 1-1000"),
+        "voltage": ("voltage_dv", _int, "LED voltage in 0.1 V, 70-120"),
+        "raw": ("raw", _bool, "1: no interpolation, each marker at its own firing instant"),
     },
     "natnet": {
         "marker_set": ("marker_set", str, "marker set to record (default: the first)"),

@@ -15,6 +15,11 @@ from typing import Any
 from spotlab.console.progress import Progress
 from spotlab.console.summaries import print_summary
 from spotlab.processing.errors import InputError
+from spotlab.processing.linear_trajectories import (
+    is_linear_recording,
+    linear_trial,
+    read_linear_recording,
+)
 from spotlab.processing.paths import check_output_paths
 from spotlab.processing.scanner_trajectories import (
     SOURCES,
@@ -36,7 +41,8 @@ def add_parser(sub: Any) -> None:
         "(by the suffix of --out). The blobs of a video-centroid recording are identified "
         "and named by a marker model (--model, or the one stored in the recording). A "
         "scanner (coda) recording needs no calibration: its 3-D comes from the unit's "
-        "geometry stored in the recording (--scanner).",
+        "geometry stored in the recording (--scanner). So does a linear-sensor (wsx) recording: "
+        "the hub's factory calibration travels in it.",
     )
     p.add_argument("input", type=Path, help="observations: OBS.npz, OBS.csv or RECORDING.spj")
     p.add_argument(
@@ -62,6 +68,12 @@ def add_parser(sub: Any) -> None:
         help="scanner recordings: 3-D from the raw angles, each at its own crossing instant "
         "(angles, default) or the unit's own 3-D (device)",
     )
+    p.add_argument(
+        "--raw",
+        action="store_true",
+        help="wsx recordings: each marker at its own firing instant, not interpolated to the "
+        "frame's instant",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
 
@@ -71,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
     check_outputs([args.out])
     if is_scanner_recording(args.input):
         return _run_scanner(args)
+    if is_linear_recording(args.input):
+        return _run_linear(args)
     calibration = args.calibration
     if calibration is None:
         calibration = calibration_for(args.input, None)
@@ -118,3 +132,28 @@ def _print_scanner(summary: dict[str, Any], out: Path) -> None:
         sd = " / ".join("-" if v is None else f"{v:.3f}" for v in m["precision_sd_mm"])
         print(f"  {m['label']:<4} {m['frames']:>7} frames   precision sd x / y / z {sd} mm")
     print(f"  wrote              {out}")
+
+
+def _run_linear(args: argparse.Namespace) -> int:
+    """A WSX recording: markers from its CCD planes and the factory calibration it carries."""
+    if args.calibration is not None or args.labels or args.model is not None:
+        raise InputError(
+            f"{args.input}: a wsx recording takes no --calibration, --labels or --model "
+            "(the hub's factory calibration is in the recording)"
+        )
+    trial, summary = linear_trial(read_linear_recording(args.input), raw=args.raw)
+    write_trial(args.out, trial)
+    summary = {"input": str(args.input), **summary}
+    if args.json:
+        print(json.dumps({**summary, "outputs": [str(args.out)]}))
+        return 0
+    how = "interpolated to each frame's start" if summary["interpolated"] else "at firing instants"
+    print(f"wsx {summary['stream']}: {summary['frames']} frames, {summary['ccds']} CCDs, {how}")
+    if summary["registration_rms_mm"] is not None:
+        rms = ", ".join(f"{v:.3f}" for v in summary["registration_rms_mm"][1:])
+        print(f"  sensors registered to sensor 0 by the markers they share (RMS {rms} mm)")
+    for m in summary["markers"]:
+        rms = "-" if m["plane_rms_mm"] is None else f"{m['plane_rms_mm']:.3f}"
+        print(f"  {m['label']:<4} {m['frames']:>7} frames   plane RMS {rms} mm")
+    print(f"  wrote              {args.out}")
+    return 0

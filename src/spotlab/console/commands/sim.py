@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from spotlab.console.commands import sim_natnet
+from spotlab.console.commands import sim_natnet, sim_wsx
 from spotlab.console.commands.sim_qualisys import add_qualisys_arguments, run_qualisys
 from spotlab.console.errors import CommandError
 from spotlab.io import FileFormatError
@@ -56,7 +56,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument(
         "family",
-        choices=["selspot", "timer", "centroid", "coda", "qualisys", "natnet"],
+        choices=["selspot", "timer", "centroid", "coda", "qualisys", "natnet", "wsx"],
         help="device family",
     )
     where = p.add_mutually_exclusive_group()
@@ -226,9 +226,10 @@ def add_parser(sub: Any) -> None:
     )  # fmt: skip
     p.add_argument(
         "--port", type=int, default=0,
-        help="qualisys: TCP port, natnet: UDP command port, on 127.0.0.1 (default 0: any free)",
+        help="qualisys, wsx: TCP port; natnet: UDP command port; on 127.0.0.1 (0: any free)",
     )  # fmt: skip
     sim_natnet.add_arguments(p)
+    sim_wsx.add_arguments(p)
     p.add_argument("--seconds", type=float, help="stop by itself after this many seconds")
     add_qualisys_arguments(p)
     p.set_defaults(run=run)
@@ -424,6 +425,8 @@ def run(args: argparse.Namespace) -> int:
         return run_qualisys(args)
     if args.family == "natnet":
         return sim_natnet.run(args)
+    if args.family == "wsx":
+        return sim_wsx.run(args)
     check_args(args)
     if args.family == "centroid":
         if args.tcp is not None:
