@@ -67,6 +67,10 @@ class StreamState:
         ``ProtocolError`` raised by the decoder (each followed by a discontinuity).
     disconnections, reconnects, device_resets : int
         Link events recorded.
+    faults : dict of str to int
+        ``error`` events that name a ``fault`` (a USB stall, timeout, short packet,
+        babble, refused set-up...), counted by that name: the faults the driver
+        detected and journalled, one event each.
     live_stats : dict or None
         The driver's own counters at the end of the recording (``link_stats`` event).
     undecodable : str
@@ -88,6 +92,7 @@ class StreamState:
     disconnections: int = 0
     reconnects: int = 0
     device_resets: int = 0
+    faults: dict[str, int] = field(default_factory=dict)
     live_stats: dict[str, Any] | None = None
     undecodable: str = ""
     recovering: bool = False
@@ -207,6 +212,9 @@ class Walk:
         detail = info.get("detail")
         if kind == "link_stats" and isinstance(detail, dict):
             state.live_stats = detail
+        if kind == "error" and isinstance(detail, dict) and isinstance(detail.get("fault"), str):
+            fault = detail["fault"]
+            state.faults[fault] = state.faults.get(fault, 0) + 1
         if kind in RECOVERY_START:
             state.recovering = True
         elif kind in RECOVERY_END:

@@ -48,6 +48,10 @@ class StreamSummary:
         do not). 0 with fewer than two frames.
     reconnects, disconnections, device_resets : int
         Recorded link events.
+    faults : dict of str to int
+        Faults the driver detected and journalled (``error`` events naming a
+        ``fault``), by name; for a WSX hub ``stall``, ``timeout``, ``short``,
+        ``babble`` (an unplugged hub is a disconnection, its return a reconnect).
     bytes : int
         RX bytes recorded.
     tx_bytes : int
@@ -85,6 +89,7 @@ class StreamSummary:
     bytes: int
     disconnections: int = 0
     device_resets: int = 0
+    faults: dict[str, int] = field(default_factory=dict)
     tx_bytes: int = 0
     duplicates: int = 0
     device_dropped: int = 0
@@ -230,6 +235,7 @@ def _stream_summary(state: StreamState, timing: FrameTiming | None) -> StreamSum
         bytes=state.rx_bytes,
         disconnections=state.disconnections,
         device_resets=state.device_resets,
+        faults=dict(state.faults),
         tx_bytes=state.tx_bytes,
         duplicates=stats.duplicates,
         device_dropped=stats.device_dropped,

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.acquisition.replay import summarize
+from spotlab.console.link_faults import fault_line
 from spotlab.processing.decoding import decoder_for
 
 
@@ -16,7 +17,8 @@ def add_parser(sub: Any) -> None:
         "info",
         help="summarise a recording: frames, losses, checksum errors, gaps, rate",
         description="Decode a recording again and report, per stream, frames, lost frames, "
-        "checksum errors, resyncs, gaps, duration and measured rate.",
+        "checksum errors, resyncs, gaps, duration and measured rate (and a WSX hub's USB "
+        "faults: stalls, timeouts, short packets, babble, unplugs and returns).",
     )
     p.add_argument("file", type=Path, help="recording journal (.spj)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -50,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
                 f"      device FIFO drops {s.get('device_dropped', 0)}, "
                 f"reconnects {s['reconnects']}, device resets {s.get('device_resets', 0)}"
             )
+        faults = fault_line(s)
+        if faults:
+            print(f"      {faults}")
         extra = s.get("device_summary") or {}
         if "labels" in extra:  # labelled 3-D markers (NatNet)
             print(f"      {len(extra['labels'])} labelled 3-D markers: {' '.join(extra['labels'])}")

@@ -22,6 +22,7 @@ from spotlab.console.device_settings import (
     requests_from_options,
 )
 from spotlab.console.errors import CommandError
+from spotlab.console.link_faults import fault_line
 from spotlab.console.options import parse_wiring
 from spotlab.console.progress import Progress
 from spotlab.core.wire import LinkEventKind
@@ -218,6 +219,9 @@ def _summary_lines(result: dict[str, Any]) -> list[str]:
             f"CRC errors {s['crc_errors']}, resyncs {s['resyncs']}, "
             f"reconnects {s['reconnects']} -> {result['out']}"
         )
+        faults = fault_line(s)
+        if faults:
+            lines.append(f"{s['name']}: {faults}")
     return lines
 
 
