@@ -37,6 +37,8 @@ LAYOUT = "wsx-bulk"
 VALUES = ("centroid", "peak", "fire_ns")
 UNITS = ("px", "counts", "ns")
 _EVENT = struct.Struct("<4sHHII")
+#: ``start_ns`` above this (292 years after power-up) does not fit a tick (int64): not a good frame.
+_MAX_START_NS = (1 << 63) - 1
 
 
 class WsxDecoder:
@@ -106,7 +108,8 @@ class WsxDecoder:
         heads = [HEADER.unpack_from(f) for f in frames]
         seqs, keep = [], []
         for i, h in enumerate(heads):
-            if h[4] != m or h[5] != s or h[6] != CCDS:
+            if h[4] != m or h[5] != s or h[6] != CCDS or h[8] > _MAX_START_NS:
+                # Not a good frame though its CRC holds: counted as a CRC error and skipped.
                 self.stats.crc_errors += 1
                 continue
             seq = self._accept(h[2], h[9])

@@ -135,3 +135,16 @@ def test_mutated_bytes_never_raise() -> None:
             block = dec.feed(part, 0)
             assert block.data.shape[1:] == (2, 3, 3)
         dec.mark_discontinuity()
+
+
+def test_a_start_beyond_int64_with_a_good_crc_is_skipped() -> None:
+    # Found by the fuzzer (spotlab.testing.fuzz, target wsx): start_ns is a u64 on the
+    # wire, a tick an int64; such a frame is not a good frame, not an OverflowError.
+    import zlib
+
+    f = bytearray(_golden("Frame"))
+    struct.pack_into("<Q", f, 20, 1 << 63)
+    struct.pack_into("<I", f, len(f) - 4, zlib.crc32(bytes(f[:-4])))
+    dec = WsxDecoder(2, 1)
+    block = dec.feed(bytes(f) + _golden("Frame"), 0)
+    assert block.seq.tolist() == [1234] and dec.stats.crc_errors == 1
