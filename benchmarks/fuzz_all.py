@@ -1,5 +1,6 @@
-"""Mutation fuzzing of every other decoder and reader (TMR, CEN, CSX, journal, C3D, TRC, rig
-TOML, marker-model JSON): only spotlab's documented errors may come out.
+"""Mutation fuzzing of every other decoder and reader (TMR, CEN, CSX, WSX frames and control
+replies, journal, C3D, TRC, rig TOML, marker-model JSON): only spotlab's documented errors
+may come out.
 
 Prints one JSON object per target: inputs, inputs that ended in a documented spotlab
 error, unexpected exceptions by type and place. Inputs that raised something else are

@@ -12,6 +12,13 @@ tmr       TMR link bytes (a recording of the simulated timer) in random reads in
           :class:`~spotlab.drivers.timer.TimerDecoder`, then ``flush``: never raises
 cen       CEN link bytes (the simulated hub, 2 cameras) into
           :class:`~spotlab.drivers.centroid.CentroidDecoder`: never raises
+wsx       WSX bulk and interrupt bytes (a recording of the simulated hub: 2 position
+          sensors, a stall and a short packet) in random reads into
+          :class:`~spotlab.drivers.wsx.decoding.WsxDecoder`: never raises, blocks
+          keep their shape and ``seq`` never goes back (:mod:`~spotlab.testing.fuzz_wsx`)
+wsx-ctl   the simulated hub's EP 0 replies (information, set-up, status, factory
+          calibration) through every parser the WSX driver uses on them:
+          :class:`~spotlab.core.errors.ProtocolError` only
 journal   a recording's file read with :class:`~spotlab.io.journal.JournalReader`:
           :class:`~spotlab.core.errors.SpotlabError` subclasses only
 c3d       a C3D file (written by spotlab from a small trial) through
@@ -42,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from spotlab.core.errors import SpotlabError
+from spotlab.testing import fuzz_wsx
 
 __all__ = ["TARGETS", "FuzzResult", "fuzz", "mutate"]
 
@@ -307,6 +315,8 @@ TARGETS: dict[str, _Target] = {
         _stream_corpus("sim://coda?markers=4&rate=200&colour_rate=0.05&ghost_rate=0.05", "coda"),
         _stream_run("coda"),
     ),
+    "wsx": _Target(fuzz_wsx.frames_corpus, fuzz_wsx.frames_run),
+    "wsx-ctl": _Target(fuzz_wsx.control_corpus, fuzz_wsx.control_run),
     "journal": _Target(_journal_corpus, _file_run(".spj", _read_journal)),
     "c3d": _Target(_c3d_corpus, _file_run(".c3d", _c3d_read)),
     "trc": _Target(_trc_corpus, _file_run(".trc", _trc_read)),
