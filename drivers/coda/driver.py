@@ -95,6 +95,8 @@ class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
     ) -> None:
         given = {"rate_hz": rate_hz, "markers": markers, "mode": mode}
         fixed = {"base_mm": base_mm, "baud": baud}
+        #: The unit of the first connection: a reconnection must find the same geometry.
+        self._first_unit: CodaVersion | None = None
         super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     @property
@@ -124,6 +126,18 @@ class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
                 f"the scanner on {self.port} ({reply.text}) reads {device.counts} counts over "
                 f"{device.fov_mdeg / 1000:g} degrees; this driver needs {COUNTS} over 40"
             )
+        first = self._first_unit
+        if first is not None and (first.base_um, first.serial_number) != (
+            device.base_um,
+            device.serial_number,
+        ):
+            raise ConfigurationError(
+                f"the scanner on {self.port} came back as {device.serial_number} with a mirror "
+                f"base of {device.base_um / 1000:g} mm; the recording holds "
+                f"{first.serial_number} with {first.base_um / 1000:g} mm (another unit, or "
+                f"another geometry than the recording's)"
+            )
+        self._first_unit = device
         want = self.config.base_um
         if want is not None and device.base_um != want:
             raise ConfigurationError(
