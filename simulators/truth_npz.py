@@ -44,14 +44,11 @@ class NpzTruthWriter(TruthWriter):
     def _write(self, row: TruthRow) -> None:
         if self._closed:
             return
-        xyz = np.full((self.n_leds, 3), np.nan)
-        keep = row.led_ids < self.n_leds
-        xyz[row.led_ids[keep]] = row.positions[keep]
         sent = bool(row.sent)
         self._heads.append(
             (row.stream, row.seq if sent else -1, row.frame_no, sent, row.world_ns, row.device_us)
         )
-        self._xyz.append(xyz)
+        self._xyz.append(self._positions(row))
 
     def flush(self) -> None:
         """Nothing: the file is written once, on close."""
