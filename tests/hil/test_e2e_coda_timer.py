@@ -44,7 +44,8 @@ from spotlab.simulators import coda_scene as scene
 
 #: Moving markers RO RY RG RC (IDs 1-4; RB, ID 5, moves too), the static L-frame
 #: (IDs 50-53), four codes not in the scene, and RB as entry 12: at 300 Hz a unit serves
-#: 12 flash slots, so RB shares RO's slot and both are reported aliased.
+#: 12 flash slots, so RB shares RO's slot and both are reported aliased. Recorded in RAW
+#: mode (angles and crossing times; 266-byte frames, 0.8 Mbit/s a unit).
 CODES = ("RO", "RY", "RG", "RC", "WR", "WO", "WY", "WG", "OR", "OY", "OG", "OC", "RB")
 IDS = (1, 2, 3, 4, 50, 51, 52, 53, 8, 9, 10, 11, 5)
 ALIASED = ("RO", "RB")
@@ -101,8 +102,8 @@ def _record(tmp_path: Path, seconds: float) -> Run:
         table = "+".join(CODES)
         result = run_cli(
             "record", "--device", f"timer={ports[2]}",
-            "--device", f"coda={ports[0]},name=codaA,markers={table}",
-            "--device", f"coda={ports[1]},name=codaB,markers={table}",
+            "--device", f"coda={ports[0]},name=codaA,markers={table},out=RAW",
+            "--device", f"coda={ports[1]},name=codaB,markers={table},out=RAW",
             "--wiring", "codaA=0", "--wiring", "codaB=1",
             "--seconds", seconds, "--out", journal, "--json", timeout=90 + 2 * seconds,
         )  # fmt: skip
@@ -117,7 +118,7 @@ def _record(tmp_path: Path, seconds: float) -> Run:
 def _check_sync(run: Run, seconds: float, listened_part: float) -> None:
     """Every frame kept; every scan one timer edge within 1 µs of its true start."""
     streams = {s["name"]: s for s in run.record["streams"]}
-    assert all(streams[n]["lost_frames"] == 0 for n in ("timer", "codaA", "codaB"))
+    assert all(streams[n]["lost_frames"] == 0 for n in ("timer", "codaA", "codaB")), streams
     rows = _rows(run.timer_truth)
     t_true = np.array([float(r["true_time_s"]) for r in rows])
     counter = np.array([10 * int(r["device_us"]) for r in rows], dtype=np.float64)

@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     check_outputs([args.out])
     if is_scanner_session(args.input):
         return _run_scanner(args)
-    if args.align_markers:
+    if args.align_markers and args.input.is_file():
         raise InputError(f"{args.input}: --align-markers is for recordings of scanners")
     calibration = args.calibration
     if calibration is None:
