@@ -270,14 +270,17 @@ def test_two_scanners_and_a_timer_in_one_frame_and_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     f = _run_and_score(tmp_path, capsys, SHORT_S, 0.5)
-    # Measured (2 s, 2026-11-25): alignment RMS 0.3 mm; rms of the whitened errors
-    # 0.98-1.02 per unit; no record more than 5 sd off (no wrong identity).
-    assert f["alignment_rms_mm"] < 0.5
+    # Measured in three runs (2 s, 2026-11-25, load 10 on 2 cores): alignment RMS
+    # 0.007-0.009 mm; RMS of the whitened errors 1.005-1.008 per unit (4 000-4 700
+    # samples each: 1 % is one standard error); largest |z| 4.0-4.2; 15 colour-ambiguous,
+    # 8 ghost and 2 700-3 000 aliased records, as the fault logs say.
+    assert f["alignment_rms_mm"] < 0.05
     for name, *_ in UNITS:
-        assert f[name]["samples"] > 0.9 * len(SCORED) * RATE * SHORT_S * 3 / 3
-        assert abs(f[name]["rms_z"] - 1.0) < 0.05, f[name]
-    assert f["max_abs_z"] < 7.0
-    assert f["flagged"]["alias"] > 0
+        assert f[name]["samples"] > 0.8 * len(SCORED) * RATE * SHORT_S
+        assert abs(f[name]["rms_z"] - 1.0) < 0.04, f[name]
+    assert f["max_abs_z"] < 6.0
+    assert f["flagged"]["colour"] > 0 and f["flagged"]["ghost"] > 0
+    assert f["flagged"]["alias"] > 0.8 * RATE * SHORT_S
 
 
 @pytest.mark.long
