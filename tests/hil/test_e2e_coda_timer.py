@@ -116,7 +116,11 @@ def _record(tmp_path: Path, seconds: float) -> Run:
 
 
 def _check_sync(run: Run, seconds: float, listened_part: float) -> None:
-    """Every frame kept; every scan one timer edge within 1 µs of its true start."""
+    """Every frame kept; every scan one timer edge within 1 µs of its true start.
+
+    ``listened_part``: the part of the nominal scans that must be recorded and of those
+    within the timer's span (a short run on a loaded machine starts its devices
+    further apart, relatively)."""
     streams = {s["name"]: s for s in run.record["streams"]}
     assert all(streams[n]["lost_frames"] == 0 for n in ("timer", "codaA", "codaB")), streams
     rows = _rows(run.timer_truth)
@@ -126,7 +130,7 @@ def _check_sync(run: Run, seconds: float, listened_part: float) -> None:
     timer_edges = extract_edges(run.blocks["timer"])
     for channel, (name, *_) in enumerate(UNITS):
         seqs = np.concatenate([b.seq for b in run.blocks[name]])
-        assert len(seqs) > 0.8 * RATE * seconds and np.all(np.diff(seqs) == 1)
+        assert len(seqs) > min(0.8, listened_part) * RATE * seconds and np.all(np.diff(seqs) == 1)
         edges = timer_edges.select(channel)
         frame_true = _scan_starts(run.truth[name], seqs)
         edge_true = (edges.tick - icept) / slope + t_true[0]
