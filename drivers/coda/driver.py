@@ -29,6 +29,8 @@ from spotlab.drivers.mcs1.commands import Reply
 from spotlab.drivers.mcs1.family import FamilyDriver
 
 FOV_MDEG = 40_000
+#: Part of the scan period the mirrors sweep before the frame is sent (coda.md §1).
+SWEEP_FRACTION = 0.8
 
 
 class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
@@ -101,9 +103,14 @@ class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
 
     @property
     def spec(self) -> StreamSpec:
-        """The stream: ``scan3``, ``2M + 4`` rows (table markers, then unidentified), µs ticks."""
+        """The stream: ``scan3``, ``2M + 4`` rows (table markers, then unidentified), µs ticks;
+        ``frame_delay_s`` in its metadata: from the scan start to the frame's last byte
+        (sweep and transmission)."""
         c = self.config
-        extra: dict[str, Any] = {"marker_ids": list(c.ids)}
+        # The frame leaves after the sweep (0.8 of the scan) and takes its bytes' time on
+        # the line: the session time base pairs frames with their pulses knowing it.
+        delay = SWEEP_FRACTION / c.rate_hz + c.frame_bytes * 10 / c.baud
+        extra: dict[str, Any] = {"marker_ids": list(c.ids), "frame_delay_s": round(delay, 9)}
         if self.device is not None:
             extra["geometry"] = {
                 "base_mm": self.device.base_um / 1000,
