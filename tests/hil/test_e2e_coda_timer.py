@@ -1,9 +1,11 @@
 """Two simulated CSX scanners and a timer, recorded together through real pseudo-terminals.
 
-The scanners publish their scan pulses to a shared lab folder; the timer's inputs 0
-and 1 are wired to them. Every recorded scan of each scanner must have exactly one
-timer edge, at the scan's true start as read by the timer's own clock (issue 18:
-synchronisation with the timer family). Unit B stands 800 mm aside, turned 15
+The three simulators are served on real ptys by threads of the test (``spotlab record``
+is its own process); the scanners publish their scan pulses to a shared lab folder, the
+timer's inputs 0 and 1 are wired to them. Every recorded scan of each scanner must have exactly one
+timer edge, at the scan's true start as read by the timer's own clock, and each scan's
+session time must be its true instant on the timer's clock within 50 µs (issue 18:
+synchronisation with the timer family; TARGETS.md). Unit B stands 800 mm aside, turned 15
 degrees. ``spotlab reconstruct`` carries B into A's frame by the markers both see and
 puts B's markers, on session time, at A's instants; only then, at the end, are the
 markers scored against the simulators' truth: their errors, whitened by the precision
@@ -21,7 +23,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,8 +30,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from _e2e import _first_line as first_line
-from _e2e import run_cli, spawn_cli, stop_process
+from _e2e import run_cli
 
 from spotlab.console.cli import main
 from spotlab.core.frames import FrameBlock
@@ -41,6 +41,9 @@ from spotlab.processing.scanner_trajectories import COUNT_RAD, read_scanner_reco
 from spotlab.processing.session_times import decode_streams, recording_timebase
 from spotlab.reconstruction.scanner import scanner_precision
 from spotlab.simulators import coda_scene as scene
+from spotlab.simulators.coda_service import CodaSimOptions, serve_coda_pty
+from spotlab.simulators.service import TimerSimOptions, serve_timer_pty
+from spotlab.simulators.transports.pty import PtyServer
 
 #: Moving markers RO RY RG RC (IDs 1-4; RB, ID 5, moves too), the static L-frame
 #: (IDs 50-53), four codes not in the scene, and RB as entry 12: at 300 Hz a unit serves
@@ -77,28 +80,30 @@ def _rows(path: Path) -> list[dict[str, str]]:
 
 
 def _record(tmp_path: Path, seconds: float) -> Run:
-    """Two scanners and a timer on ptys (started together), recorded for ``seconds``."""
+    """Two scanners and a timer, each served on a real pty by a thread of this process
+    (no interpreter start-up each), recorded by ``spotlab record`` for ``seconds``."""
     lab = tmp_path / "lab"
+    lab.mkdir()
     journal = tmp_path / "run.spj"
     truth = {n: tmp_path / f"{n}.npz" for n, *_ in UNITS}
     logs = {n: tmp_path / f"{n}.faults.json" for n, *_ in UNITS}
     timer_truth = tmp_path / "timer.csv"
-    procs: list[tuple[subprocess.Popen[bytes], Path, Path]] = []
+    servers: list[PtyServer] = []
     try:
         for k, (name, offset, drift, pose) in enumerate(UNITS):
             where = f"{pose.yaw_deg:g},{','.join(f'{v:g}' for v in pose.origin)}"
-            out, err = tmp_path / f"{name}.out", tmp_path / f"{name}.err"
-            args = ["sim", "coda", "--pty", "--markers", 5, "--seed", k + 1, "--truth",
-                    truth[name], "--fault-log", logs[name], "--lab", lab, "--lab-name", name,
-                    "--clock-offset", offset, "--clock-drift-ppm", drift, "--pose", where,
-                    "--reference"]  # fmt: skip
-            procs.append((spawn_cli(args, out, err), out, err))
-        out, err = tmp_path / "timer.out", tmp_path / "timer.err"
-        args = ["sim", "timer", "--pty", "--rate", 100, "--input", "0=codaA", "--input",
-                "1=codaB", "--lab", lab, "--truth", timer_truth,
-                "--clock-offset", 1000]  # fmt: skip
-        procs.append((spawn_cli(args, out, err), out, err))
-        ports = [first_line(o, p, e, timeout=30.0) for p, o, e in procs]
+            options = CodaSimOptions(
+                markers=5, seed=k + 1, truth=truth[name], fault_log=logs[name], lab=lab,
+                lab_name=name, clock_offset_s=offset, clock_drift_ppm=drift, pose=where,
+                reference=1,
+            )  # fmt: skip
+            servers.append(serve_coda_pty(options))
+        timer = TimerSimOptions(
+            rate_hz=100.0, inputs="0=codaA,1=codaB", lab=lab, truth=timer_truth,
+            clock_offset_s=1000.0,
+        )  # fmt: skip
+        servers.append(serve_timer_pty(timer))
+        ports = [str(server.path) for server in servers]
         table = "+".join(CODES)
         result = run_cli(
             "record", "--device", f"timer={ports[2]}",
@@ -108,8 +113,8 @@ def _record(tmp_path: Path, seconds: float) -> Run:
             "--seconds", seconds, "--out", journal, "--json", timeout=90 + 2 * seconds,
         )  # fmt: skip
     finally:
-        for p, _, _ in procs:
-            assert stop_process(p) == 0
+        for server in servers:
+            server.stop()
     assert result.returncode == 0, result.stderr
     blocks = decode_streams(journal).blocks
     return Run(journal, truth, logs, timer_truth, json.loads(result.stdout), blocks)
@@ -292,10 +297,11 @@ def test_two_scanners_and_a_timer_in_one_frame_and_time(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     f = _run_and_score(tmp_path, capsys, SHORT_S, 0.5)
-    # Measured in three runs (2 s, 2026-11-25, load 10 on 2 cores): alignment RMS
-    # 0.007-0.009 mm; RMS of the whitened errors 1.005-1.008 per unit (4 000-4 700
-    # samples each: 1 % is one standard error); largest |z| 4.0-4.2; 15 colour-ambiguous,
-    # 8 ghost and 2 700-3 000 aliased records, as the fault logs say.
+    # Measured in six runs (2 s, 2026-11-25, load 8-10 on 2 cores): alignment RMS
+    # 0.006-0.010 mm; session times within 0.1 µs; RMS of the whitened errors 1.002-1.017
+    # per unit (4 000-5 000 samples each: 1 % is one standard error); largest |z|
+    # 4.0-4.3; 15-17 colour-ambiguous, 8 ghost and 2 700-3 100 aliased records, as the
+    # fault logs say.
     assert f["alignment_rms_mm"] < 0.05
     for name, *_ in UNITS:
         assert f[name]["samples"] > 0.8 * len(SCORED) * RATE * SHORT_S
