@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from spotlab.acquisition.timebase import StreamTiming
 from spotlab.core.errors import SpotlabError
 from spotlab.io import Trial
 from spotlab.io.journal import JournalReader
@@ -84,7 +85,7 @@ def is_scanner_session(path: Path) -> bool:
     return SCAN_KIND in kinds and all(k in (SCAN_KIND, "timer") for k in kinds)
 
 
-def frame_times(rec: ScannerRecording, path: Path, timing: Any) -> F64:
+def frame_times(rec: ScannerRecording, path: Path, timing: StreamTiming) -> F64:
     """Session time (s) of each scan's mid-sweep on the recording's frame grid, NaN where lost."""
     k = np.asarray(timing.seq - timing.seq[0], dtype=np.int64)
     n = rec.values.shape[0]
