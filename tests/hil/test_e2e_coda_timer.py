@@ -32,13 +32,18 @@ import numpy as np
 import pytest
 from _e2e import run_cli
 
+from spotlab.acquisition.timebase import session_timebase
 from spotlab.console.cli import main
 from spotlab.core.frames import FrameBlock
 from spotlab.drivers.timer import extract_edges
 from spotlab.io import read_c3d
-from spotlab.processing.scanner_session import frame_times
-from spotlab.processing.scanner_trajectories import COUNT_RAD, read_scanner_recording
-from spotlab.processing.session_times import decode_streams, recording_timebase
+from spotlab.processing.scanner_trajectories import COUNT_RAD
+from spotlab.processing.session_times import (
+    DecodedStreams,
+    decode_streams,
+    read_streams,
+    recorded_wiring,
+)
 from spotlab.reconstruction.scanner import scanner_precision
 from spotlab.simulators import coda_scene as scene
 from spotlab.simulators.coda_service import CodaSimOptions, serve_coda_pty
@@ -71,7 +76,11 @@ class Run:
     logs: dict[str, Path]
     timer_truth: Path
     record: dict[str, Any]
-    blocks: dict[str, list[FrameBlock]]
+    decoded: DecodedStreams
+
+    @property
+    def blocks(self) -> dict[str, list[FrameBlock]]:
+        return self.decoded.blocks
 
 
 def _rows(path: Path) -> list[dict[str, str]]:
@@ -116,8 +125,8 @@ def _record(tmp_path: Path, seconds: float) -> Run:
         for server in servers:
             server.stop()
     assert result.returncode == 0, result.stderr
-    blocks = decode_streams(journal).blocks
-    return Run(journal, truth, logs, timer_truth, json.loads(result.stdout), blocks)
+    decoded = decode_streams(journal)
+    return Run(journal, truth, logs, timer_truth, json.loads(result.stdout), decoded)
 
 
 def _check_sync(run: Run, seconds: float, listened_part: float) -> None:
@@ -196,6 +205,14 @@ def _check_identities(run: Run) -> dict[str, int]:
     return counted
 
 
+def _mid_sweeps(timing: Any) -> np.ndarray:
+    """Session time of each scan's mid-sweep on the stream's frame grid (NaN: lost)."""
+    k = timing.seq - timing.seq[0]
+    out = np.full(int(k[-1]) + 1, np.nan)
+    out[k] = timing.time_s + 0.4 / RATE
+    return out
+
+
 def _sigma_rad(p_unit: np.ndarray) -> np.ndarray:
     """The simulated unit's angle noise (rad) at its points: its noise at the range plus
     the quantisation of a count (scoring only: the simulator's model)."""
@@ -220,16 +237,15 @@ def _score(run: Run, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> dict
     trial = read_c3d(c3d)
     fit = summary["units"][1]["alignment"]
     # A's scans: the world instant of each mid-sweep, from A's truth.
-    rec = {n: read_scanner_recording(run.journal, n) for n, *_ in UNITS}
-    base = recording_timebase(run.journal)
+    devices, timer, _ = read_streams(run.journal, run.decoded)  # decoded once
+    base = session_timebase(devices, timer, recorded_wiring(run.journal))
     seqs = base.streams["codaA"].seq
     start = np.full(trial.n_frames, np.nan)
     start[seqs - seqs[0]] = _scan_starts(run.truth["codaA"], seqs)
     at_world = start + 0.4 / RATE
     # B's interpolation weights at A's instants: the model's sd shrinks by
     # sqrt((1-w)^2 + w^2) for a mean of two scans.
-    t_a = frame_times(rec["codaA"], run.journal, base.streams["codaA"])
-    t_b = frame_times(rec["codaB"], run.journal, base.streams["codaB"])
+    t_a, t_b = (_mid_sweeps(base.streams[n]) for n in ("codaA", "codaB"))
     ok_b = np.isfinite(t_b)
     i = np.clip(np.searchsorted(t_b[ok_b], t_a), 1, ok_b.sum() - 1)
     w = (t_a - t_b[ok_b][i - 1]) / (t_b[ok_b][i] - t_b[ok_b][i - 1])
