@@ -16,13 +16,17 @@ from spotlab.drivers.coda import CodaDriver
 from spotlab.io import read_c3d
 
 
-@pytest.fixture(scope="module")
-def journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("coda") / "run.spj"
-    device = CodaDriver("sim://coda?markers=3&seed=2", markers=3)
-    with Session([device], [Recorder(path)], close_devices=True) as session:
+def _record(path: Path, devices: list[CodaDriver]) -> Path:
+    """Half a second of ``devices`` recorded in this process into ``path``."""
+    with Session(list(devices), [Recorder(path)], close_devices=True) as session:
         session.run_for(0.5)
     return path
+
+
+@pytest.fixture(scope="module")
+def journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    device = CodaDriver("sim://coda?markers=3&seed=2", markers=3)
+    return _record(tmp_path_factory.mktemp("coda") / "run.spj", [device])
 
 
 def test_reconstruct_prints_the_precision_model(
@@ -66,9 +70,7 @@ def two_units(tmp_path_factory: pytest.TempPathFactory) -> Path:
                    name=name, markers=table)
         for k, (name, pose) in enumerate((("codaA", "0,0,0,0"), ("codaB", "15,800,0,0")))
     ]  # fmt: skip
-    with Session(devices, [Recorder(path)], close_devices=True) as session:
-        session.run_for(0.5)
-    return path
+    return _record(path, devices)
 
 
 def test_two_units_in_the_first_ones_frame(
