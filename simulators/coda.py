@@ -11,7 +11,11 @@ mis-identification (``colour ambiguous``), ID aliasing of table entries beyond
 the rate's limit (``aliased``, under the lower-numbered entry's ID) and a
 reflection ghost (``ghost suspected``).
 
-Truth: the frame truth CSV (:mod:`spotlab.simulators.truth`) has, per scan, the
+The scanner's own faults go into the device's fault log beside the link faults
+(``colour``, ``alias``, ``ghost``; source ``device``).
+
+Truth: the frame truth CSV (:mod:`spotlab.simulators.truth`; ``.npz`` arrays of the
+same for a path with that suffix, :mod:`spotlab.simulators.truth_npz`) has, per scan, the
 world time of the scan start and columns ``led<ID>_x_mm ...`` with every moving
 scene marker's true position then (world frame, mm: the scanner frame of a unit
 at the origin; a unit placed elsewhere, ``pose``, sees it turned and shifted);
@@ -32,17 +36,20 @@ from spotlab.simulators import coda_scene as scene
 from spotlab.simulators import coda_wire as cw
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
-from spotlab.simulators.faults import FaultInjector
+from spotlab.simulators.faults import FaultEntry, FaultInjector
 from spotlab.simulators.lab import LabPublisher
 from spotlab.simulators.mcs1_commands import Handler
 from spotlab.simulators.mcs1_device import Mcs1Device
 from spotlab.simulators.mcs1_stream import Mcs1Stream, TakenFrame
-from spotlab.simulators.truth import TruthRow, TruthWriter
+from spotlab.simulators.truth import TruthRow
+from spotlab.simulators.truth_npz import truth_writer
 
 FIRMWARE = "1.0"
 #: Time from the end of the sweep to the frame being queued.
 ASSEMBLY_S = 50e-6
 MODE_NAMES = {v: k for k, v in cw.MODES.items()}
+#: Kinds of the scanner's own faults in its fault log (beside the link faults).
+SCANNER_FAULT_KINDS = ("colour", "alias", "ghost")
 
 
 @dataclass
@@ -85,6 +92,7 @@ class CodaStream(Mcs1Stream):
         self.device = device
         self.cconfig = config
         self._hidden = np.zeros((cw.MAX_MARKERS + 1, 3), dtype=np.int64)
+        self._aliased: dict[int, FaultEntry] = {}
         self.sweep_s = scene.SWEEP_FRACTION * 1000.0 / config.rate_mhz
         super().__init__(device.clock, index, config.rate_mhz, start_ns)
 
@@ -136,6 +144,7 @@ class CodaStream(Mcs1Stream):
         )
         ids, entries = table[in_scene], entry[in_scene]
         records: list[cw.MarkerRecord] = []
+        faults: list[tuple[str, int, int]] = []  # (kind, true ID, ID reported) per record
         if ids.shape[0]:
             counts, dt, xyz, flags = self._detect(ids, t0_s, rng, ghost=False)
             slot = entries % limit
@@ -152,6 +161,8 @@ class CodaStream(Mcs1Stream):
                     int(report[i]), int(flags[i]), tuple(xyz[i].tolist()),
                     tuple(counts[i].tolist()), tuple(dt[i].tolist()),
                 ))  # fmt: skip
+                kind = "alias" if shared[i] else "colour" if misread[i] else ""
+                faults.append((kind, int(ids[i]), int(report[i])))
             ghosts = ids[rng.random(ids.shape[0]) < dev.fault_rates.ghost]
             if ghosts.shape[0]:
                 g_counts, g_dt, g_xyz, g_flags = self._detect(ghosts, t0_s, rng, ghost=True)
@@ -160,7 +171,9 @@ class CodaStream(Mcs1Stream):
                         int(ghosts[i]), int(g_flags[i]) | cw.F_GHOST, tuple(g_xyz[i].tolist()),
                         tuple(g_counts[i].tolist()), tuple(g_dt[i].tolist()),
                     ))  # fmt: skip
+                    faults.append(("ghost", int(ghosts[i]), int(ghosts[i])))
         slots = table.shape[0] + cw.SPARE_SLOTS
+        self._log_faults(faults[:slots], int(w0))
         records = sorted(records[:slots], key=lambda r: (r.marker_id, r.flags))
         payload = cw.csx_payload(
             self.frame_no, self._tick, 0, cfg.mode, table.shape[0], limit, records
@@ -171,6 +184,30 @@ class CodaStream(Mcs1Stream):
             led_ids=scene_ids, positions=scene.marker_positions(scene_ids, np.asarray(t0_s)),
         )  # fmt: skip
         return self._finish(payload, truth, ambient_high=dev.fault_rates.ambient > 0.5)
+
+    def _log_faults(self, faults: list[tuple[str, int, int]], world_ns: int) -> None:
+        """Enter the scanner's own faults of this scan in the device's fault log.
+
+        A colour misreading or a ghost is one entry (``detail``: the marker, the ID
+        reported); an aliased marker is one entry per ``START:`` whose ``detail["scans"]``
+        counts the scans it was reported in under another entry's ID.
+        """
+        log = self.device.fault_log
+        t_s = self.device.faults.since_start(world_ns)
+        for kind, marker, reported in faults:
+            if not kind:
+                continue
+            if kind == "alias":
+                entry = self._aliased.get(marker)
+                if entry is None:
+                    entry = self._aliased[marker] = log.new(kind, t_s, world_ns, "device", None)
+                    entry.frame_no.append(self.frame_no)
+                    entry.detail = {"marker": marker, "reported": reported, "scans": 0}
+                entry.detail["scans"] += 1
+                continue
+            entry = log.new(kind, t_s, world_ns, "device", None)
+            entry.frame_no.append(self.frame_no)
+            entry.detail = {"marker": marker, "reported": reported}
 
     def _frame(self, seq: int, payload: bytes, flags: int) -> bytes:
         return cw.csx_frame(seq, payload, flags)
@@ -201,9 +238,11 @@ class CodaDevice(Mcs1Device[CodaConfig]):
     seed : int
         Seed of the scene's noise and faults and of line garbling.
     truth : path, optional
-        Frame truth CSV.
+        Frame truth: CSV, or ``.npz`` arrays for that suffix
+        (:mod:`~spotlab.simulators.truth_npz`).
     fault_log : path, optional
-        JSON fault log.
+        JSON fault log: the link faults and the scanner's own
+        (:data:`SCANNER_FAULT_KINDS`, :meth:`CodaStream._log_faults`).
     default_rate_hz : float
         Scan rate after reset or ``INIT:`` (coda.md: 300 Hz).
     now_ns : int, optional
@@ -244,7 +283,7 @@ class CodaDevice(Mcs1Device[CodaConfig]):
         self.scene_seed = int(seed)
         super().__init__(
             clock, faults, serial=serial, seed=seed,
-            truth=TruthWriter(truth, scene_markers + 1) if truth is not None else None,
+            truth=truth_writer(truth, scene_markers + 1) if truth is not None else None,
             fault_log=fault_log, default_rate_hz=default_rate_hz, now_ns=now_ns, lab=lab,
         )  # fmt: skip
 

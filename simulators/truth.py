@@ -97,12 +97,17 @@ class TruthWriter:
         if len(self._lines) >= self.flush_every or force:
             self.flush()
 
-    def _write(self, row: TruthRow) -> None:
-        if self._closed:
-            return
+    def _positions(self, row: TruthRow) -> F64:
+        """The row's positions (n_leds, 3) by LED id, NaN where it has none."""
         xyz = np.full((self.n_leds, 3), np.nan)
         keep = row.led_ids < self.n_leds
         xyz[row.led_ids[keep]] = row.positions[keep]
+        return xyz
+
+    def _write(self, row: TruthRow) -> None:
+        if self._closed:
+            return
+        xyz = self._positions(row)
         head = (
             f"{row.stream},{row.seq if row.sent else -1},{row.frame_no},{int(bool(row.sent))},"
             f"{row.world_ns / 1e9:.9f},{row.device_us & 0xFFFFFFFF},{row.device_us}"

@@ -29,6 +29,8 @@ from spotlab.drivers.mcs1.commands import Reply
 from spotlab.drivers.mcs1.family import FamilyDriver
 
 FOV_MDEG = 40_000
+#: Part of the scan period the mirrors sweep before the frame is sent (coda.md §1).
+SWEEP_FRACTION = 0.8
 
 
 class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
@@ -95,13 +97,20 @@ class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
     ) -> None:
         given = {"rate_hz": rate_hz, "markers": markers, "mode": mode}
         fixed = {"base_mm": base_mm, "baud": baud}
+        #: The unit of the first connection: a reconnection must find the same geometry.
+        self._first_unit: CodaVersion | None = None
         super().__init__(port, name, given, fixed, reply_timeout, reconnect_timeout)
 
     @property
     def spec(self) -> StreamSpec:
-        """The stream: ``scan3``, ``2M + 4`` rows (table markers, then unidentified), µs ticks."""
+        """The stream: ``scan3``, ``2M + 4`` rows (table markers, then unidentified), µs ticks;
+        ``frame_delay_s`` in its metadata: from the scan start to the frame's last byte
+        (sweep and transmission)."""
         c = self.config
-        extra: dict[str, Any] = {"marker_ids": list(c.ids)}
+        # The frame leaves after the sweep (0.8 of the scan) and takes its bytes' time on
+        # the line: the session time base pairs frames with their pulses knowing it.
+        delay = SWEEP_FRACTION / c.rate_hz + c.frame_bytes * 10 / c.baud
+        extra: dict[str, Any] = {"marker_ids": list(c.ids), "frame_delay_s": round(delay, 9)}
         if self.device is not None:
             extra["geometry"] = {
                 "base_mm": self.device.base_um / 1000,
@@ -124,6 +133,18 @@ class CodaDriver(FamilyDriver[CodaConfig, CodaDecoder, CodaVersion]):
                 f"the scanner on {self.port} ({reply.text}) reads {device.counts} counts over "
                 f"{device.fov_mdeg / 1000:g} degrees; this driver needs {COUNTS} over 40"
             )
+        first = self._first_unit
+        if first is not None and (first.base_um, first.serial_number) != (
+            device.base_um,
+            device.serial_number,
+        ):
+            raise ConfigurationError(
+                f"the scanner on {self.port} came back as {device.serial_number} with a mirror "
+                f"base of {device.base_um / 1000:g} mm; the recording holds "
+                f"{first.serial_number} with {first.base_um / 1000:g} mm (another unit, or "
+                f"another geometry than the recording's)"
+            )
+        self._first_unit = device
         want = self.config.base_um
         if want is not None and device.base_um != want:
             raise ConfigurationError(

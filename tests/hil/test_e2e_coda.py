@@ -19,11 +19,14 @@ from _e2e import _first_line as first_line
 from _e2e import run_cli, spawn_cli, stop_process
 
 from spotlab.acquisition.replay import replay
+from spotlab.console.cli import main
 from spotlab.processing.decoding import decoder_for
 
 
 @pytest.mark.timeout(60)
-def test_record_info_and_replay_of_a_scanner(tmp_path: Path) -> None:
+def test_record_info_and_replay_of_a_scanner(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     journal = tmp_path / "run.spj"
     truth = tmp_path / "coda.csv"
     out, err = tmp_path / "coda.stdout", tmp_path / "coda.stderr"
@@ -44,9 +47,9 @@ def test_record_info_and_replay_of_a_scanner(tmp_path: Path) -> None:
     stream = json.loads(result.stdout)["streams"][0]
     assert stream["name"] == "coda" and stream["lost_frames"] == 0
 
-    info = run_cli("info", journal, "--json")
-    assert info.returncode == 0, info.stderr
-    assert "coda" in info.stdout
+    # info and reconstruct in this process (their main; no interpreter start-up each).
+    assert main(["info", str(journal), "--json"]) == 0
+    assert "coda" in capsys.readouterr().out
 
     blocks = [b for name, b in replay(journal, decoder_for) if name == "coda"]
     data = np.concatenate([b.data for b in blocks])
@@ -71,9 +74,8 @@ def test_record_info_and_replay_of_a_scanner(tmp_path: Path) -> None:
 
     # Trajectories from the angles, with the unit's geometry stored in the recording.
     c3d = tmp_path / "run.c3d"
-    rec = run_cli("reconstruct", journal, "--out", c3d, "--json")
-    assert rec.returncode == 0, rec.stderr
-    summary = json.loads(rec.stdout)
+    assert main(["reconstruct", str(journal), "--out", str(c3d), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
     assert summary["base_mm"] == 1000.0 and summary["source"] == "angles"
     assert [m["label"] for m in summary["markers"]] == ["RO", "RY", "RG", "RC", "RB", "RV"]
     assert c3d.stat().st_size > 0

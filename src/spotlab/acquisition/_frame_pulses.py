@@ -16,6 +16,7 @@ from scipy.ndimage import minimum_filter1d
 from scipy.stats import theilslopes
 
 from spotlab.acquisition.recorded_frames import DeviceFrames, TimerFrames
+from spotlab.core.streams import StreamSpec
 
 I64 = npt.NDArray[np.int64]
 F64 = npt.NDArray[np.float64]
@@ -45,6 +46,16 @@ def host_times(ticks: I64, arrival_ns: I64, tick_hz: float, rate_hz: float) -> F
     resid = resid - slope * x
     envelope = minimum_filter1d(resid, size=size, mode="nearest")
     return np.asarray((1.0 + slope) * x + envelope + arrival_ns[0] * 1e-9, dtype=np.float64)
+
+
+def delivery_delay_s(spec: StreamSpec) -> float:
+    """Seconds from a frame's tick to the earliest it can reach the host, as its stream
+    declares them: the acquisition span of time-multiplexed slots, plus the spec's
+    ``metadata["frame_delay_s"]`` (a family whose frame leaves well after its tick: a
+    scanner's sweep and its frame's transmission) when there is one."""
+    delay = spec.metadata.get("frame_delay_s")
+    extra = float(delay) if isinstance(delay, (int, float)) and math.isfinite(delay) else 0.0
+    return (spec.slot_period_s or 0.0) * spec.n_markers + max(extra, 0.0)
 
 
 def _frame_index(seq: I64, ticks: I64, period_ticks: float) -> I64:
@@ -117,8 +128,8 @@ def pulsed_device(frames: DeviceFrames) -> PulsedDevice:
         d = d[d > 0]
         if d.size:
             period_ticks = float(np.median(d))
-    span = (spec.slot_period_s or 0.0) * spec.n_markers
-    host = host_times(tk, frames.arrival_ns, spec.tick_hz, spec.tick_hz / period_ticks) - span
+    host = host_times(tk, frames.arrival_ns, spec.tick_hz, spec.tick_hz / period_ticks)
+    host -= delivery_delay_s(spec)
     run = frames.seq // SEQ_RUN
     index = np.empty_like(frames.seq)
     for r in np.unique(run):

@@ -16,7 +16,9 @@ pulse, so within a run (device and timer streaming without restart) ``pulse =
 frame_index + k`` for one integer ``k``. The periodic pulses alone do not tell ``k``:
 it comes from the host arrival stamps, as the most common offset between each frame
 and the edge nearest to it in host time (lower envelope of the arrivals, with the
-frame's acquisition span of time-multiplexed slots removed). This needs the two
+frame's acquisition span of time-multiplexed slots removed, and the delay its stream
+declares before a frame can leave, ``frame_delay_s``: :func:`delivery_delay_s`). This
+needs the two
 streams' fastest deliveries to differ by less than half a frame period (about 1 ms
 here against 5-10 ms periods). A clock step or reset does not move ``k``: the pairs
 carry it to :func:`fit_edges`, which finds it.
@@ -37,6 +39,7 @@ from spotlab.acquisition._frame_pulses import (
     PulsedDevice,
     assign_channels,
     channel_edges,
+    delivery_delay_s,
     frame_edge_pairs,
     host_times,
     pulsed_device,
@@ -193,8 +196,8 @@ def _arrival_times(
         )  # fmt: skip
     # the lower envelope first: frames queued before the reader started (or behind a busy
     # host) arrive late in bursts, which would bend the recursive line fit
-    span = (spec.slot_period_s or 0.0) * spec.n_markers
-    host = host_times(frames.ticks, frames.arrival_ns, spec.tick_hz, spec.rate_hz) - span
+    host = host_times(frames.ticks, frames.arrival_ns, spec.tick_hz, spec.rate_hz)
+    host -= delivery_delay_s(spec)
     res = dejitter_arrivals(frames.ticks, host, spec.tick_hz, allow_resets=True)
     times = to_session(res.model(frames.ticks))
     if not _increasing_within_epochs(frames.ticks, times):

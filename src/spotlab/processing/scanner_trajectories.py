@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.acquisition.replay import replay
+from spotlab.acquisition._replay_engine import Walk
 from spotlab.core.errors import RecordingError
 from spotlab.core.frames import FrameBlock
 from spotlab.io import Trial
 from spotlab.io.journal import JournalReader
-from spotlab.processing.decoding import decoder_for, input_suffix
+from spotlab.processing.decoding import decoder_for
 from spotlab.processing.errors import InputError
 from spotlab.reconstruction.scanner import scanner_position, scanner_precision
 
@@ -74,17 +74,6 @@ class ScannerRecording:
     stream: str
 
 
-def is_scanner_recording(path: Path) -> bool:
-    """True when ``path`` is a recording (``.spj``) whose streams are all scanner streams."""
-    if input_suffix(path) != ".spj" or not path.is_file():
-        return False
-    try:
-        specs = [m.get("spec") for m in JournalReader(path).streams.values()]
-    except RecordingError:
-        return False
-    return bool(specs) and all(isinstance(s, dict) and s.get("kind") == SCAN_KIND for s in specs)
-
-
 def read_scanner_recording(path: Path, stream: str | None = None) -> ScannerRecording:
     """Decode every frame of one scanner stream of a recording.
 
@@ -104,12 +93,18 @@ def read_scanner_recording(path: Path, stream: str | None = None) -> ScannerReco
     """
     names: set[str] = set()
     blocks: list[FrameBlock] = []
+    geometries: list[dict[str, Any]] = []
     try:
         declared = JournalReader(path).streams
-        for name, block in replay(path, decoder_for):
-            names.add(name)
-            if stream is None or name == stream:
+        for kind, state, block in Walk(path, decoder_for).steps():
+            if kind != "block" or block is None:
+                continue
+            names.add(state.name)
+            if stream is None or state.name == stream:
                 blocks.append(block)
+                geometry = _geometry(state.metadata)
+                if geometry not in geometries:
+                    geometries.append(geometry)
     except RecordingError as exc:
         raise InputError(f"{path}: {exc}") from None
     if stream is None and len(names) != 1:
@@ -126,6 +121,7 @@ def read_scanner_recording(path: Path, stream: str | None = None) -> ScannerReco
     geometry = meta.get("geometry")
     if not isinstance(geometry, dict) or "base_mm" not in geometry:
         raise InputError(f"{path}: the recording does not store the scanner's geometry")
+    check_geometry(path, stream, [g for g in geometries if g] or [geometry], meta)
     labels = [str(c) for c in meta.get("config", {}).get("markers", [])]
     m = len(labels)
     seq = np.concatenate([b.seq for b in blocks])
@@ -148,6 +144,43 @@ def read_scanner_recording(path: Path, stream: str | None = None) -> ScannerReco
         values, grid_flags, grid_ticks, float(spec["rate_hz"]), float(geometry["base_mm"]),
         labels, stream,
     )  # fmt: skip
+
+
+def _geometry(metadata: dict[str, Any]) -> dict[str, Any]:
+    """The ``geometry`` a stream's metadata announces ({} without one)."""
+    spec = metadata.get("spec")
+    meta = spec.get("metadata") if isinstance(spec, dict) else None
+    geometry = meta.get("geometry") if isinstance(meta, dict) else None
+    return dict(geometry) if isinstance(geometry, dict) else {}
+
+
+def check_geometry(
+    path: Path, stream: str, geometries: list[dict[str, Any]], meta: dict[str, Any]
+) -> None:
+    """Refuse a stream whose unit reported several geometries, or another mirror base than
+    its configuration asked for (``base_um``).
+
+    Raises
+    ------
+    InputError
+        One line naming both geometries.
+    """
+
+    def text(g: dict[str, Any]) -> str:
+        base = float(g.get("base_mm", math.nan))
+        return f"a mirror base of {base:g} mm ({g.get('serial_number', '?')})"
+
+    if len(geometries) > 1:
+        raise InputError(
+            f"{path}: stream {stream!r}: the unit reported {text(geometries[0])}, later "
+            f"{text(geometries[1])}; another unit or another geometry than the recording's"
+        )
+    asked = meta.get("config", {}).get("base_um")
+    if asked is not None and geometries and float(asked) / 1000 != float(geometries[0]["base_mm"]):
+        raise InputError(
+            f"{path}: stream {stream!r}: the recording asked for a mirror base of "
+            f"{float(asked) / 1000:g} mm, the unit reported {text(geometries[0])}"
+        )
 
 
 def angles_at(angles: F64, times_us: F64, at_us: F64, window: int = 5) -> F64:

@@ -156,3 +156,20 @@ def test_a_device_catching_up_never_runs_frame_times_backwards() -> None:
     out = session_timebase([a], None, {})
     assert np.all(np.diff(out.streams["a"].time_s) > 0)
     assert any("one line per clock epoch" in n for n in out.streams["a"].notes)
+
+
+def test_a_stream_declares_how_late_its_frames_leave() -> None:
+    """A scanner's frame leaves after its sweep and transmission (``frame_delay_s``); a
+    time-multiplexed one after its slots; both are taken off the arrival envelope."""
+    from spotlab.acquisition._frame_pulses import delivery_delay_s
+
+    scan = StreamSpec(
+        name="coda", kind="scan3", n_sensors=1, n_markers=4, rate_hz=300.0, tick_hz=1e6,
+        metadata={"frame_delay_s": 0.004},
+    )  # fmt: skip
+    assert delivery_delay_s(scan) == 0.004
+    slots = StreamSpec(
+        name="spx", kind="image2d", n_sensors=2, n_markers=8, rate_hz=100.0, tick_hz=1e6,
+        slot_period_s=1e-4, metadata={"frame_delay_s": "soon"},
+    )  # fmt: skip
+    assert delivery_delay_s(slots) == pytest.approx(8e-4)

@@ -1,7 +1,9 @@
-"""``spotlab reconstruct`` and ``spotlab export`` of a scanner recording (no calibration)."""
+"""``spotlab reconstruct`` and ``spotlab export`` of a scanner recording (no calibration),
+and of a recording of two units (B carried into A's frame by the L-frame both see)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -14,13 +16,17 @@ from spotlab.drivers.coda import CodaDriver
 from spotlab.io import read_c3d
 
 
-@pytest.fixture(scope="module")
-def journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("coda") / "run.spj"
-    device = CodaDriver("sim://coda?markers=3&seed=2", markers=3)
-    with Session([device], [Recorder(path)], close_devices=True) as session:
+def _record(path: Path, devices: list[CodaDriver]) -> Path:
+    """Half a second of ``devices`` recorded in this process into ``path``."""
+    with Session(list(devices), [Recorder(path)], close_devices=True) as session:
         session.run_for(0.5)
     return path
+
+
+@pytest.fixture(scope="module")
+def journal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    device = CodaDriver("sim://coda?markers=3&seed=2", markers=3)
+    return _record(tmp_path_factory.mktemp("coda") / "run.spj", [device])
 
 
 def test_reconstruct_prints_the_precision_model(
@@ -53,3 +59,50 @@ def test_a_calibration_is_refused_in_one_line(
     assert main([*args, str(journal)]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "takes no --calibration" in err[0]
+
+
+@pytest.fixture(scope="module")
+def two_units(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("coda2") / "two.spj"
+    table = "RO,RY,RG,RC,WR,WO,WY,WG"
+    devices = [
+        CodaDriver(f"sim://coda?markers=4&seed={k + 1}&reference=1&pose={pose}",
+                   name=name, markers=table)
+        for k, (name, pose) in enumerate((("codaA", "0,0,0,0"), ("codaB", "15,800,0,0")))
+    ]  # fmt: skip
+    return _record(path, devices)
+
+
+def test_two_units_in_the_first_ones_frame(
+    two_units: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "two.c3d"
+    assert main(["reconstruct", str(two_units), "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    fit = summary["units"][1]["alignment"]
+    assert fit["method"] == "still" and fit["markers"] == ["WR", "WO", "WY", "WG"]
+    assert fit["rms_mm"] < 0.1 and summary["time_base"] == "host"
+    # B stands 800 mm along A's x, turned 15 degrees: p_a = R p_b + t.
+    assert np.allclose(fit["translation_mm"], [800.0, 0.0, 0.0], atol=3.0)
+    yaw = np.degrees(np.arctan2(fit["rotation"][1][0], fit["rotation"][0][0]))
+    assert yaw == pytest.approx(15.0, abs=0.1)
+    trial = read_c3d(out)
+    assert trial.labels[:2] == ["codaA.RO", "codaA.RY"] and len(trial.labels) == 16
+    # The L-frame as B saw it, carried into A's frame, where A saw it.
+    a, b = trial.points[:, 4:8], trial.points[:, 12:16]
+    assert np.nanmedian(np.linalg.norm(a - b, axis=-1)) < 1.0
+    assert main(["export", str(two_units), "--c3d", str(tmp_path / "e.c3d")]) == 0
+    assert "x 16 markers" in capsys.readouterr().out
+    assert read_c3d(tmp_path / "e.c3d").labels == trial.labels
+
+
+def test_shared_markers_no_unit_has_is_one_line(
+    two_units: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["reconstruct", str(two_units), "--out", str(tmp_path / "x.c3d")]
+    assert main([*args, "--align-markers", "WR", "XX"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no scanner has the marker code(s) XX" in err[0]
+    assert main([*args, "--align-markers", "RO", "WR"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "needs 3 shared markers" in err[0]

@@ -7,7 +7,13 @@ import pytest
 
 from spotlab.drivers.coda import CodaDecoder
 from spotlab.processing.errors import InputError
-from spotlab.processing.scanner_alignment import align_scanners
+from spotlab.processing.scanner_alignment import (
+    align_pairs,
+    align_scanners,
+    align_still,
+    points_at,
+    still_markers,
+)
 from spotlab.processing.scanner_trajectories import ScannerRecording, scanner_points
 from spotlab.simulators import coda_scene as scene
 from spotlab.simulators.clock import DeviceClock
@@ -59,3 +65,31 @@ def test_too_few_shared_reference_markers_is_one_clear_error() -> None:
     pa = scanner_points(a)
     with pytest.raises(InputError, match="not seen by both: WY, WG"):
         align_scanners(pa, LABELS, pa[:, :6], LABELS[:6], REFERENCE)
+
+
+def test_still_markers_and_simultaneous_pairs_give_the_same_motion() -> None:
+    a = _unit(scene.Pose(), 1, frames=120)
+    b = _unit(scene.Pose(15.0, (800.0, 0.0, 0.0)), 2, frames=120)
+    pa, pb = scanner_points(a), scanner_points(b)
+    still = still_markers(pa, pb, LABELS)
+    assert [LABELS[i] for i in still] == REFERENCE
+    fit = align_still(pa, pb, LABELS, still)
+    assert fit.method == "still" and fit.rms < 0.2
+    # The moving markers at common instants (both units on one clock here: B's scans
+    # interpolated at A's mid-sweeps) give the same motion.
+    ta = (a.ticks_us + 0.4e6 / RATE) / 1e6
+    tb = (b.ticks_us + 0.4e6 / RATE) / 1e6
+    here = points_at(tb, pb, ta, 1 / RATE)
+    pairs = align_pairs(pa[:, :4], here[:, :4], LABELS[:4])
+    assert pairs.method == "pairs" and pairs.pairs > 300 and pairs.rms < 1.0
+    assert np.allclose(pairs.t, fit.t, atol=2.0) and np.allclose(pairs.R, fit.R, atol=1e-3)
+    with pytest.raises(InputError, match="seen by both: 2 of 4"):
+        align_pairs(pa[:, :4], np.where(np.arange(4)[None, :, None] < 2, here[:, :4], np.nan),
+                    LABELS[:4])  # fmt: skip
+
+
+def test_points_between_two_scans_in_a_row_only() -> None:
+    t = np.array([0.0, 1.0, 2.0, 4.0])
+    p = np.arange(4, dtype=np.float64)[:, None, None] * np.ones((1, 1, 3))
+    out = points_at(t, p, np.array([0.5, 2.5, 3.5, 5.0]), 1.0)
+    assert out[0, 0, 0] == 0.5 and np.isnan(out[1:]).all()  # a lost scan, the end

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,3 +124,40 @@ def test_commands_and_start_checks() -> None:
     with pytest.raises(CommandError) as err:
         device._check_start()  # 9600 baud after reset
     assert err.value.code == 0x80
+
+
+def test_the_scanners_own_faults_are_in_its_fault_log(tmp_path: Path) -> None:
+    """Each misread and ghost record is one log entry naming the marker and the ID sent;
+    an aliased marker one entry per START counting its scans; the truth as npz."""
+    rates = CodaFaults(colour=0.05, ghost=0.05, occlusion=0.0)
+    truth = tmp_path / "truth.npz"
+    device = CodaDevice(
+        DeviceClock(epoch_ns=0), scene_markers=16, fault_rates=rates, seed=7, now_ns=0,
+        truth=truth,
+    )  # fmt: skip
+    table = [*range(1, 13), 13]  # 300 Hz serves 12: entry 12 (ID 13) shares ID 1's slot
+    stream = CodaStream(device, CodaConfig(300_000, 3, table), 10**8, 0)
+    colour = ghost = 0
+    for _ in range(200):
+        taken = stream.take()
+        device._truth.add(taken.truth)  # type: ignore[union-attr]
+        taken.truth.sent = True
+        payload = taken.payload
+        for i in range(struct.unpack_from("<H", payload, 10)[0]):
+            flags = payload[16 + 26 * i + 1]
+            colour += bool(flags & cw.F_COLOUR_AMBIGUOUS)
+            ghost += bool(flags & cw.F_GHOST)
+    entries = device.fault_log.entries
+    kinds = [e.kind for e in entries]
+    assert kinds.count("colour") == colour > 0 and kinds.count("ghost") == ghost > 0
+    assert all(e.source == "device" and e.frame_no for e in entries)
+    misread = [e.detail for e in entries if e.kind == "colour"]
+    assert all(d["marker"] != d["reported"] for d in misread)
+    alias = {e.detail["marker"]: e.detail for e in entries if e.kind == "alias"}
+    assert sorted(alias) == [1, 13] and all(d["reported"] == 1 for d in alias.values())
+    assert all(d["scans"] == 200 for d in alias.values())
+    device.close(catch_up=False)
+    t = np.load(truth)
+    assert t["markers_mm"].shape == (200, 17, 3) and t["time_s"].shape == (200,)
+    assert np.all(t["sent"]) and list(t["frame_no"]) == list(range(200))
+    assert np.isnan(t["markers_mm"][:, 0]).all() and np.isfinite(t["markers_mm"][:, 1:]).all()

@@ -10,7 +10,9 @@ streams stacked in stream order (the calibration lists them so), see
 :mod:`spotlab.processing.synchronised_export`.
 
 A scanner (coda) recording needs no calibration: its trajectories come from its raw
-angles and the geometry it stores (:mod:`spotlab.processing.scanner_trajectories`).
+angles and the geometry it stores (:mod:`spotlab.processing.scanner_trajectories`); the
+units of a recording of several are carried into the first one's frame by the markers
+they share (:mod:`spotlab.processing.scanner_session`).
 
 A recording of labelled 3-D markers (QTM's, Motive's) is written as it is; its rigid
 bodies go beside ``OUT`` as ``OUT``'s stem + ``.bodies.csv``
@@ -50,11 +52,7 @@ from spotlab.processing import (
 )
 from spotlab.processing.labelled_points import labelled_trial
 from spotlab.processing.rigid_bodies import bodies_path, recording_bodies, write_bodies_csv
-from spotlab.processing.scanner_trajectories import (
-    is_scanner_recording,
-    read_scanner_recording,
-    scanner_trial,
-)
+from spotlab.processing.scanner_session import is_scanner_session, session_scanner_trial
 
 
 def add_parser(sub: Any) -> None:
@@ -204,8 +202,8 @@ def run(args: argparse.Namespace) -> int:
             check_output_paths([("bodies", table)])
             summary["bodies"] = str(table)
             summary["body_rows"] = write_bodies_csv(table, bodies)
-    elif suffix == ".spj" and args.calibration is None and is_scanner_recording(path):
-        trial, scanner = scanner_trial(read_scanner_recording(path))  # 3-D from its angles
+    elif suffix == ".spj" and args.calibration is None and is_scanner_session(path):
+        trial, scanner = session_scanner_trial(path)  # 3-D from the angles, one frame
         summary = {"input": str(path), "frames": trial.n_frames, "markers": trial.n_markers,
                    "rate_hz": trial.point_rate, "scanner": scanner}  # fmt: skip
     elif suffix in OBSERVATION_SUFFIXES:

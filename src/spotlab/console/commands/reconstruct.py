@@ -21,12 +21,8 @@ from spotlab.processing.linear_trajectories import (
     read_linear_recording,
 )
 from spotlab.processing.paths import check_output_paths
-from spotlab.processing.scanner_trajectories import (
-    SOURCES,
-    is_scanner_recording,
-    read_scanner_recording,
-    scanner_trial,
-)
+from spotlab.processing.scanner_session import is_scanner_session, session_scanner_trial
+from spotlab.processing.scanner_trajectories import SOURCES
 from spotlab.processing.session_times import calibration_for
 from spotlab.processing.trajectories import check_outputs, reconstruct_file, write_trial
 from spotlab.reconstruction import METHODS
@@ -74,6 +70,14 @@ def add_parser(sub: Any) -> None:
         help="wsx recordings: each marker at its own firing instant, not interpolated to the "
         "frame's instant",
     )
+    p.add_argument(
+        "--align-markers",
+        nargs="+",
+        metavar="CODE",
+        help="recordings of several scanners: the colour codes of the shared object's "
+        "markers that carry every unit into the first one's frame (e.g. WR WO WY WG); "
+        "default: every marker both units see",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(run=run)
 
@@ -81,8 +85,10 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     check_output_paths([("--out", args.out)])
     check_outputs([args.out])
-    if is_scanner_recording(args.input):
+    if is_scanner_session(args.input):
         return _run_scanner(args)
+    if args.align_markers and args.input.is_file():
+        raise InputError(f"{args.input}: --align-markers is for recordings of scanners")
     if is_linear_recording(args.input):
         return _run_linear(args)
     calibration = args.calibration
@@ -112,7 +118,7 @@ def _run_scanner(args: argparse.Namespace) -> int:
             f"{args.input}: a scanner recording takes no --calibration, --labels or --model "
             "(its geometry and marker codes are in the recording)"
         )
-    trial, summary = scanner_trial(read_scanner_recording(args.input), args.scanner)
+    trial, summary = session_scanner_trial(args.input, args.scanner, args.align_markers)
     write_trial(args.out, trial)
     summary = {"input": str(args.input), **summary}
     if args.json:
@@ -128,6 +134,14 @@ def _print_scanner(summary: dict[str, Any], out: Path) -> None:
         f"scanner {summary['stream']}: {summary['frames']} frames, 3-D from the "
         f"{summary['source']} (base {summary['base_mm']:g} mm)"
     )
+    for unit in summary.get("units", [])[1:]:
+        fit = unit["alignment"]
+        print(
+            f"  {unit['stream']}: {unit['frames']} frames, base {unit['base_mm']:g} mm, into "
+            f"{summary['stream']}'s frame by {', '.join(fit['markers'])} ("
+            + ("still, mean positions" if fit["method"] == "still" else f"{fit['pairs']} pairs")
+            + f", RMS {fit['rms_mm']:.3f} mm), times from {summary['time_base']}"
+        )
     for m in summary["markers"]:
         sd = " / ".join("-" if v is None else f"{v:.3f}" for v in m["precision_sd_mm"])
         print(f"  {m['label']:<4} {m['frames']:>7} frames   precision sd x / y / z {sd} mm")

@@ -86,7 +86,12 @@ def add_parser(sub: Any) -> None:
         help="frame rate the scene is built for, Hz (default 100; coda: scan rate, default 300)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of noise, motion and random faults")
-    p.add_argument("--truth", type=Path, help="write ground truth CSV (seq, true_time_s, markers)")
+    p.add_argument(
+        "--truth",
+        type=Path,
+        help="write ground truth CSV (seq, true_time_s, markers); coda: .npz arrays for that "
+        "suffix",
+    )
     p.add_argument("--faults", default="", help="fault schedule, e.g. 'bitflip@1.5,drop@2,reset@6'")
     p.add_argument("--fault-log", type=Path, help="write what was injected as JSON")
     p.add_argument(
