@@ -251,12 +251,12 @@ def test_the_calibration_wizard_in_the_page(sim_console: tuple[str, Path], brows
     page = browser.new_page(viewport={"width": 1280, "height": 900})
     page.goto(url)
     page.wait_for_function("window.spotlab.calibration && window.spotlab.messages > 0")
-    # first, a device reconnected from the page: the preview starts again and it comes back
+    # first, a device reconnected from the page: it reconnects alone and comes back
     page.select_option("#device-name", "timer")
     assert page.is_disabled("#device-set-rate") is False
     page.click("#device-reconnect")
     page.wait_for_function(
-        "document.getElementById('device-msg').textContent.includes('reconnect asked')"
+        "document.getElementById('device-msg').textContent.includes('reconnects alone')"
     )
     page.wait_for_function(
         "document.querySelectorAll('#devices td.ok').length === 3", timeout=20_000

@@ -89,10 +89,13 @@ def make_app(
         if name not in acq.plan.names():
             return _error(404, f"no device {name!r} in the lab")
         try:
-            acq.restart()
+            how = acq.reconnect(name)
         except InputError as exc:
             return _error(409, str(exc))
-        return JSONResponse({"device": name, "restarting": True}, status_code=202)
+        return JSONResponse(
+            {"device": name, "restarting": how == "session", "reconnecting": how},
+            status_code=202,
+        )
 
     async def configure(request: Request) -> Response:
         if (denied := await guard(request)) is not None:

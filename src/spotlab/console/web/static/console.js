@@ -60,14 +60,16 @@ function showDeviceChoices(devices) {
   }
   const d = devices.find((x) => x.name === select.value);
   document.getElementById("device-set-rate").disabled = recording || !(d && d.rate_settable);
-  document.getElementById("device-reconnect").disabled = recording;
+  // a device reconnects alone in the running session, a trial being recorded goes on
+  document.getElementById("device-reconnect").disabled = false;
 }
 
 function deviceAction(what, body) {
   const name = document.getElementById("device-name").value;
   say("device-msg", name + ": " + what + "…");
   api("/api/devices/" + encodeURIComponent(name) + "/" + what, { method: "POST", body: JSON.stringify(body) })
-    .then(() => say("device-msg", name + ": " + what + " asked; the devices start again"))
+    .then((r) => say("device-msg", name + ": " + what + " asked; " + (r.reconnecting === "device"
+      ? "it reconnects alone, the others go on" : "the devices start again")))
     .catch((e) => say("device-msg", name + ": " + e.message, true));
 }
 document.getElementById("device-reconnect").addEventListener("click", () => deviceAction("reconnect", {}));
