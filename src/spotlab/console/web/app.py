@@ -124,7 +124,10 @@ def make_app(
         try:
             raw = await body(request)
             if step in ("wand", "lframe"):
-                wizard.record(step, raw.get("subject"), raw.get("session"), raw.get("seconds"))
+                wizard.record(
+                    step, raw.get("subject"), raw.get("session"), raw.get("seconds"),
+                    raw.get("device"),
+                )  # fmt: skip
             elif step == "run":
                 wizard.calibrate()
             elif step == "accept":

@@ -445,6 +445,13 @@ function showCalibration(c) {
   if (c.error) text += ": " + c.error;
   say("cal-step", text, c.step === "failed");
   document.getElementById("cal-wand").disabled = busy;
+  const select = document.getElementById("cal-device");  // a lab file's camera systems
+  const names = c.devices || [];
+  if (Array.from(select.options).map((o) => o.value).join("\n") !== names.join("\n")) {
+    select.replaceChildren(...names.map((n) => el("option", { value: n }, n)));
+  }
+  if (c.device && names.includes(c.device)) select.value = c.device;
+  document.getElementById("cal-device-label").hidden = names.length === 0;
   document.getElementById("cal-lframe").disabled = busy || !["wand_done", "lframe_done", "failed"].includes(c.step) || !c.wand_trial;
   document.getElementById("cal-run").disabled = busy || !c.lframe_trial || c.step === "accepted";
   document.getElementById("cal-accept").disabled = c.step !== "calibrated";
@@ -490,6 +497,7 @@ function calibrationStep(step, body) {
     .catch((e) => say("cal-step", e.message, true));
 }
 document.getElementById("cal-wand").addEventListener("click", () => calibrationStep("wand", {
+  device: document.getElementById("cal-device").value || null,
   subject: document.getElementById("cal-subject").value, session: document.getElementById("cal-session").value,
   seconds: Number(document.getElementById("cal-wand-seconds").value),
 }));
