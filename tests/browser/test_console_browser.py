@@ -203,6 +203,16 @@ def test_a_browser_leaving_mid_trial_does_not_end_it(
     page.fill("#seconds", "2")
     page.click("#record")
     page.wait_for_function("window.spotlab.status.mode === 'recording'")
+    # a device reconnected from the page while the trial runs: alone, the trial goes on
+    page.select_option("#device-name", "timer")
+    assert page.is_disabled("#device-reconnect") is False
+    page.click("#device-reconnect")
+    page.wait_for_function(
+        "document.getElementById('device-msg').textContent.includes('reconnects alone')"
+    )
+    # the clock offset of the session's clock model: a dash, or seconds since its start
+    offsets = page.locator("#devices tbody tr td:nth-child(10)").all_inner_texts()
+    assert all(o == "—" or abs(float(o)) < 30 for o in offsets), offsets
     page.close()  # the browser goes away mid-trial
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline:

@@ -86,6 +86,25 @@ def test_link_health_counts_per_second_and_restarts_with_a_session() -> None:
     }
 
 
+def test_the_clock_offset_is_the_session_clock_models() -> None:
+    """Offset: session time minus device time by the arrival fit; drift from its rate."""
+    from spotlab.console.web.live_view import StreamClock
+
+    t0_ns = 5_000_000_000
+    clock = StreamClock(1000.0, t0_ns)  # a 1 kHz device counter
+    assert clock.offset_s is None and clock.drift_ppm is None
+    rng = np.random.default_rng(0)
+    for k in range(1000):  # 10 s at 100 Hz; its zero 2.5 s into the session, 100 ppm fast
+        tick = 123_000 + 10 * k
+        session_s = 2.5 + tick / 1000.0 / (1 + 100e-6) + 0.002 + 0.0005 * rng.random()
+        clock.update(tick, t0_ns + int(session_s * 1e9))
+    offset, drift = clock.offset_s, clock.drift_ppm
+    assert offset is not None and drift is not None
+    # at the last tick (133 s of device time) 100 ppm is 13.3 ms; plus the mean delay
+    assert abs(offset - (2.5 + 0.00225 - 133.0 * 100e-6 / (1 + 100e-6))) < 0.0005, offset
+    assert abs(drift - 100.0) < 30.0, drift
+
+
 def test_gap_counts_of_trajectories() -> None:
     from spotlab.console.web.processing_jobs import gap_counts
 

@@ -190,6 +190,8 @@ class Acquisition:
             stats = driver.stats.as_dict()
             age = self.view.last_arrival_s(name)
             clock = self.view.clocks.get(name)
+            offset = None if clock is None else clock.offset_s
+            drift = None if clock is None else clock.drift_ppm
             running = session is not None and name not in self.missing
             rate = None
             try:
@@ -209,12 +211,8 @@ class Acquisition:
                     "resyncs": stats["resyncs"],
                     "reconnects": stats["reconnects"],
                     "rate_settable": "rate" in FAMILY_SETTINGS.get(driver.family, {}),
-                    "clock_offset_s": None if clock is None else round(clock.offset_s, 6),
-                    "clock_drift_ppm": (
-                        None
-                        if clock is None or clock.drift_ppm is None
-                        else round(clock.drift_ppm, 1)
-                    ),
+                    "clock_offset_s": None if offset is None else round(offset, 6),
+                    "clock_drift_ppm": None if drift is None else round(drift, 1),
                     "last_error": self.missing.get(name)
                     or self.errors.get(name)
                     or (

@@ -3,7 +3,8 @@
 
 const token = new URLSearchParams(location.search).get("token");
 // What the page received, for the operator's scripts and the browser tests.
-const received = { messages: 0, markers: null, markerSeqs: [], status: null };
+// frames3d: 3-D frames drawn (each a new marker frame), for the load benchmark.
+const received = { messages: 0, markers: null, markerSeqs: [], status: null, frames3d: 0 };
 window.spotlab = received;
 
 function api(path, options = {}) {
@@ -123,7 +124,7 @@ function show2d(views) {
 }
 
 // ---- 3-D view ------------------------------------------------------------------------
-const view = { az: -0.9, el: 0.45, dist: 9000, half: 2500 };
+const view = { az: -0.9, el: 0.45, dist: 9000, half: 2500, drawnSeq: null };
 function project(p, c) {
   const [x, y, z] = p;
   const ca = Math.cos(view.az), sa = Math.sin(view.az);
@@ -166,6 +167,7 @@ function show3d(markers, cameras) {
     g.fillText(cam.name, x + 6, y + 10);
   }
   if (!markers) return;
+  if (markers.seq !== view.drawnSeq) { view.drawnSeq = markers.seq; received.frames3d += 1; }
   markers.points.forEach((p, i) => {
     if (!p) return;
     const [x, y] = project(p, c);
@@ -446,12 +448,12 @@ function showCalibration(c) {
   say("cal-step", text, c.step === "failed");
   document.getElementById("cal-wand").disabled = busy;
   const select = document.getElementById("cal-device");  // a lab file's camera systems
-  const names = c.devices || [];
-  if (Array.from(select.options).map((o) => o.value).join("\n") !== names.join("\n")) {
-    select.replaceChildren(...names.map((n) => el("option", { value: n }, n)));
+  const choices = c.devices || [];
+  if (Array.from(select.options).map((o) => o.value).join("\n") !== choices.join("\n")) {
+    select.replaceChildren(...choices.map((n) => el("option", { value: n }, n)));
   }
-  if (c.device && names.includes(c.device)) select.value = c.device;
-  document.getElementById("cal-device-label").hidden = names.length === 0;
+  if (c.device && choices.includes(c.device)) select.value = c.device;
+  document.getElementById("cal-device-label").hidden = choices.length === 0;
   document.getElementById("cal-lframe").disabled = busy || !["wand_done", "lframe_done", "failed"].includes(c.step) || !c.wand_trial;
   document.getElementById("cal-run").disabled = busy || !c.lframe_trial || c.step === "accepted";
   document.getElementById("cal-accept").disabled = c.step !== "calibrated";
