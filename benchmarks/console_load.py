@@ -12,13 +12,18 @@ Each round records one trial of ``--seconds`` twice, in turn:
   ``chromium``, driven by Playwright) for the whole trial, the trial started and stopped
   through the API.
 
-Each run prints one JSON line: the trial's frames, lost frames and frame rate per
-stream (its sidecar, from the journal), the live pipeline's host latency (p50, p99, mean
-µs, read just before the stop), and with the page the 3-D view's update rate measured
-in the browser (new marker frames the page drew per second, ``window.spotlab.frames3d``,
-over the middle of the trial) and the live messages it received per second. A last line
-(``summary``) gives the medians over the rounds and the targets: no frame lost, the
-latency with the console within 10 % of the figure without, >= 30 updates a second.
+Each run prints one JSON line: the trial's frames and lost frames per stream (its
+sidecar, from the journal); how far each device kept real time (``realtime``: the
+device time its frames span over the trial's duration); the live pipeline's host
+latency (p50, p99, mean µs, read just before the stop); with the page, the 3-D view's
+update rate measured in the browser (new marker frames the page drew per second,
+``window.spotlab.frames3d``, over the middle of the trial) and the live messages it
+received per second; the machine's load average and the share of a core each simulator
+process used. A last line (``summary``) gives the medians over the rounds and the
+targets: no frame lost, the latency with the console within 10 % of the figure
+without, >= 30 updates a second. ``hub_in_real_time`` false means the hub's simulator
+fell behind 300 Hz (a loaded machine starves it: with its host's decoding it needs
+0.4-0.8 of a core at 300 Hz), so the run is not conclusive.
 
 Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2]``. A shared 2-core
 machine is noisy: the rounds alternate the two runs so that both see the same load.
@@ -28,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import statistics
 import subprocess
@@ -76,6 +82,31 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
             proc.wait()
 
 
+def _cpu_s(pid: int) -> float:
+    """CPU time (user + system) a process used so far, s."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class Load:
+    """The machine's load and the simulators' CPU share over one run."""
+
+    def __init__(self, sims: dict[str, int]) -> None:
+        self.sims = sims
+        self.t0 = time.monotonic()
+        self.cpu0 = {name: _cpu_s(pid) for name, pid in sims.items()}
+
+    def result(self) -> dict[str, Any]:
+        wall = time.monotonic() - self.t0
+        return {
+            "loadavg_1min": round(os.getloadavg()[0], 2),
+            "sim_cpu_share": {
+                name: round((_cpu_s(pid) - self.cpu0[name]) / wall, 3)
+                for name, pid in self.sims.items()
+            },
+        }
+
+
 def _latency(latency: dict[str, Any] | None) -> dict[str, Any]:
     if latency is None:
         return {"live_frames": 0, "live_p50_us": None, "live_p99_us": None, "live_mean_us": None}
@@ -87,15 +118,24 @@ def _latency(latency: dict[str, Any] | None) -> dict[str, Any]:
     }
 
 
-def _trial(info: dict[str, Any]) -> dict[str, Any]:
+def _trial(info: dict[str, Any], data: Path) -> dict[str, Any]:
+    """The trial's figures; ``realtime``: per stream the device time its frames span
+    (ticks) over the trial's duration (the session's, after the start-up dialogue): 1
+    for a device that kept real time, below for a simulator that fell behind (above for
+    one that started streaming before the others were up)."""
+    from spotlab.acquisition.summary import summarize
+    from spotlab.processing.decoding import decoder_for
+
     seconds = float(info["duration_s"] or 0.0)
+    journal = data / info["subject"] / info["session"] / f"{info['trial']}.spj"
+    spans = {
+        s["name"]: s["duration_s"] for s in summarize(journal, decoder_for).to_dict()["streams"]
+    }
     return {
         "seconds": seconds,
         "frames": info["frames"],
         "lost": info["lost"],
-        "rate_hz": {
-            k: round(v / seconds, 1) if seconds else None for k, v in info["frames"].items()
-        },
+        "realtime": {k: round(v / seconds, 3) if seconds else None for k, v in spans.items()},
         "messages": info["messages"],
     }
 
@@ -125,20 +165,26 @@ def _headless(lab: Path, data: Path, seconds: float) -> int:
     return 0
 
 
-def _run_without(lab: Path, folder: Path, seconds: float, n: int) -> dict[str, Any]:
+def _run_without(
+    lab: Path, folder: Path, seconds: float, n: int, sims: dict[str, int]
+) -> dict[str, Any]:
     data = folder / f"data-without-{n}"
+    load = Load(sims)
     args = [sys.executable, __file__, "--headless", str(lab), str(data), str(seconds)]
     done = subprocess.run(args, capture_output=True, text=True, timeout=seconds + 180)
     if done.returncode != 0:
         raise RuntimeError(f"the acquisition alone failed: {done.stderr[-2000:]}")
     got = json.loads(done.stdout.splitlines()[-1])
     return {"bench": "console_load", "run": "without", "round": n,
-            **_trial(got["trial"]), **_latency(got["latency"])}  # fmt: skip
+            **_trial(got["trial"], data), **_latency(got["latency"]), **load.result()}  # fmt: skip
 
 
 # ---- with the console and its page in Chromium -------------------------------------------
-def _run_with(lab: Path, folder: Path, seconds: float, n: int, browser: Any) -> dict[str, Any]:
+def _run_with(
+    lab: Path, folder: Path, seconds: float, n: int, browser: Any, sims: dict[str, int]
+) -> dict[str, Any]:
     data = folder / f"data-with-{n}"
+    load = Load(sims)
     proc, url = _spawn(
         [*CLI, "console", "--lab", str(lab), "--port", "0", "--no-browser", "--data", str(data)],
         folder,
@@ -167,9 +213,10 @@ def _run_with(lab: Path, folder: Path, seconds: float, n: int, browser: Any) -> 
         _stop(proc)
     span_s = (b[0] - a[0]) / 1e3
     return {
-        "bench": "console_load", "run": "with", "round": n, **_trial(info), **_latency(latency),
+        "bench": "console_load", "run": "with", "round": n, **_trial(info, data),
+        **_latency(latency),
         "page_3d_fps": round((b[1] - a[1]) / span_s, 1),
-        "page_messages_per_s": round((b[2] - a[2]) / span_s, 1),
+        "page_messages_per_s": round((b[2] - a[2]) / span_s, 1), **load.result(),
     }  # fmt: skip
 
 
@@ -185,14 +232,17 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     for run in ("without", "with"):
         for key in ("live_p50_us", "live_p99_us", "live_mean_us"):
             out[f"{run}_{key}"] = median(run, key)
-        out[f"{run}_hub_rate_hz"] = round(
-            statistics.median(r["rate_hz"].get("hub") or 0 for r in rows if r["run"] == run), 1
+        out[f"{run}_hub_realtime"] = round(
+            statistics.median(r["realtime"].get("hub") or 0 for r in rows if r["run"] == run), 3
         )
     out["lost_frames"] = lost
     out["p50_ratio"] = None if not without or not with_ else round(with_ / without, 3)
     p99w, p99 = out["without_live_p99_us"], out["with_live_p99_us"]
     out["p99_ratio"] = None if not p99w or not p99 else round(p99 / p99w, 3)
     out["page_3d_fps"] = fps
+    out["loadavg_1min"] = round(statistics.median(r["loadavg_1min"] for r in rows), 2)
+    # a hub whose frames span less than 99 % of the trial fell behind: not conclusive
+    out["hub_in_real_time"] = min(r["realtime"].get("hub") or 0.0 for r in rows) >= 0.99
     out["targets_met"] = {
         "no_frame_lost": lost == 0,
         "p50_within_10_percent": out["p50_ratio"] is not None and out["p50_ratio"] <= 1.10,
@@ -239,10 +289,11 @@ def main() -> int:
             rows = []
             for n in range(args.rounds):
                 for run in ("without", "with"):
+                    pids = {"hub": hub.pid, "selspot": spx.pid}
                     if run == "without":
-                        row = _run_without(lab, folder, args.seconds, n)
+                        row = _run_without(lab, folder, args.seconds, n, pids)
                     else:
-                        row = _run_with(lab, folder, args.seconds, n, browser)
+                        row = _run_with(lab, folder, args.seconds, n, browser, pids)
                     rows.append(row)
                     print(json.dumps(row), flush=True)
             print(json.dumps(_summary(rows)), flush=True)

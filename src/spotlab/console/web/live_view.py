@@ -53,7 +53,8 @@ class StreamClock:
     falls back to for a stream without a timer input: an online line fit of host
     arrival times against device ticks (:class:`ArrivalDejitter`, liblsl's dejitter;
     docs/synchronisation.md), on the session's reference: the host's monotonic clock, 0
-    at the session's start. One pair a block is fitted (the block's last frame).
+    at the session's start. :class:`ViewSink` fits a block's last frame, at most
+    :data:`CLOCK_HZ` times a second.
 
     Parameters
     ----------
@@ -68,51 +69,41 @@ class StreamClock:
         self.t0_ns = t0_ns
         self._fit = ArrivalDejitter(tick_hz, allow_resets=True)
         self._first_s: float | None = None
-        self._last_tick = 0
-        self._last_s = 0.0
+        #: Session time minus device time (ticks / tick rate) at the latest pair, s, by
+        #: the model (None before it has enough pairs): where the device clock's zero
+        #: lies on the session's time line. Two streams' difference is their clocks'.
+        self.offset_s: float | None = None
+        #: The device clock's rate against the session's, ppm, by the model (None
+        #: before 5 s of pairs: arrival stamps are millisecond-level).
+        self.drift_ppm: float | None = None
 
     def update(self, tick: int, arrival_ns: int) -> None:
-        """Fit one (device tick, host arrival) pair."""
+        """Fit one (device tick, host arrival) pair; the offset and drift follow."""
         t = (arrival_ns - self.t0_ns) / 1e9
         try:
             self._fit.update(np.array([tick], dtype=np.int64), np.array([t]))
         except ClockError:  # ticks that repeat: start the fit again
             self._fit = ArrivalDejitter(self.tick_hz, allow_resets=True)
             self._first_s = None
+            self.offset_s = self.drift_ppm = None
             return
         if self._first_s is None:
             self._first_s = t
-        self._last_tick, self._last_s = tick, t
-
-    def _segment(self) -> ClockSegment | None:
         try:
-            return self._fit.model.segments[-1]
+            seg: ClockSegment = self._fit.model.segments[-1]
         except ClockError:  # too few pairs yet
-            return None
-
-    @property
-    def offset_s(self) -> float | None:
-        """Session time minus device time (ticks / tick rate) at the latest frame, s, by
-        the model (None before it has enough pairs): where the device clock's zero lies
-        on the session's time line. Two streams' difference is their clocks' offset."""
-        seg = self._segment()
-        if seg is None:
-            return None
-        tick = np.array([self._last_tick], dtype=np.int64)
-        return float(seg.seconds(tick)[0]) - self._last_tick / self.tick_hz
-
-    @property
-    def drift_ppm(self) -> float | None:
-        """The device clock's rate against the session's, ppm, by the model (None before
-        5 s of frames: arrival stamps are millisecond-level)."""
-        seg = self._segment()
-        if seg is None or self._first_s is None or self._last_s - self._first_s < 5.0:
-            return None
-        return (1.0 / (seg.rate * self.tick_hz) - 1.0) * 1e6
+            return
+        self.offset_s = (
+            float(seg.seconds(np.array([tick], dtype=np.int64))[0]) - tick / self.tick_hz
+        )
+        if t - self._first_s >= 5.0:
+            self.drift_ppm = (1.0 / (seg.rate * self.tick_hz) - 1.0) * 1e6
 
 
 #: Stream kinds with a 2-D view (a timer has none).
 VIEWED = ("image2d", "blobs2d")
+#: Pairs a second a stream's clock model is fitted with at most.
+CLOCK_HZ = 10.0
 #: Seconds after a stream's first frame before its clock is fitted (the frames of the
 #: first second arrive in bursts: start-up dialogue, queued frames).
 ANCHOR_AFTER_S = 1.0
@@ -140,6 +131,7 @@ class ViewSink(SinkBase):
         self.views: dict[str, StreamView] = {}
         self.clocks: dict[str, StreamClock] = {}
         self._t0_ns = time.monotonic_ns()  # the session's reference: 0 s here
+        self._fitted_ns: dict[str, int] = {}
         self.units: dict[str, str] = {}
         self._columns: dict[str, tuple[int, int]] = {}
         self._tick_hz: dict[str, float] = {}
@@ -170,7 +162,9 @@ class ViewSink(SinkBase):
                 clock = self.clocks.get(stream)
                 if clock is None:
                     clock = self.clocks[stream] = StreamClock(tick_hz, self._t0_ns)
-                clock.update(int(block.ticks[-1]), arrival)
+                if arrival - self._fitted_ns.get(stream, 0) >= 1e9 / CLOCK_HZ:
+                    self._fitted_ns[stream] = arrival
+                    clock.update(int(block.ticks[-1]), arrival)
         kind = self._kinds.get(stream)
         if kind not in VIEWED:
             return

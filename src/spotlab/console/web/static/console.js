@@ -511,6 +511,7 @@ document.getElementById("cal-accept").addEventListener("click", () => calibratio
 
 // ---- the live socket ------------------------------------------------------------------
 let lastMode = null;
+let lastSlow = null;
 function connect() {
   const proto = location.protocol === "https:" ? "wss://" : "ws://";
   const ws = new WebSocket(proto + location.host + "/api/live" + (token ? "?token=" + encodeURIComponent(token) : ""));
@@ -527,11 +528,14 @@ function connect() {
       received.markerSeqs.push(m.markers.seq);
       if (received.markerSeqs.length > 100) received.markerSeqs.shift();
     }
-    showMode(m.status);
-    showDevices(m.devices);
-    showDeviceChoices(m.devices);
-    showBanner(m.status, m.devices);
-    show2d(m.views);
+    if (m.slow !== lastSlow) {  // the tables and 2-D views are new about 10 times a second
+      lastSlow = m.slow;
+      showMode(m.status);
+      showDevices(m.devices);
+      showDeviceChoices(m.devices);
+      showBanner(m.status, m.devices);
+      show2d(m.views);
+    }
     show3d(m.markers, m.status.cameras);
     keepSeries(m.markers);
     showSeries();
