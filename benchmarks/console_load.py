@@ -18,12 +18,13 @@ device time its frames span over the trial's duration); the live pipeline's host
 latency (p50, p99, mean µs, read just before the stop); with the page, the 3-D view's
 update rate measured in the browser (new marker frames the page drew per second,
 ``window.spotlab.frames3d``, over the middle of the trial) and the live messages it
-received per second; the machine's load average and the share of a core each simulator
-process used. A last line (``summary``) gives the medians over the rounds and the
-targets: no frame lost, the latency with the console within 10 % of the figure
-without, >= 30 updates a second. ``hub_in_real_time`` false means the hub's simulator
-fell behind 300 Hz (a loaded machine starves it: with its host's decoding it needs
-0.4-0.8 of a core at 300 Hz), so the run is not conclusive.
+received per second; the machine's load average, the share of a core each simulator
+process used over the run and the acquiring process over the trial (``host_cpu_share``:
+the console, or the acquisition alone). A last line (``summary``) gives the medians
+over the rounds and the targets: no frame lost, the latency with the console within
+10 % of the figure without, >= 30 updates a second. ``hub_in_real_time`` false means
+the hub's simulator fell behind 300 Hz (a loaded machine starves it: with its host's
+decoding it needs 0.4-0.8 of a core at 300 Hz), so the run is not conclusive.
 
 Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2]``. A shared 2-core
 machine is noisy: the rounds alternate the two runs so that both see the same load.
@@ -156,12 +157,15 @@ def _headless(lab: Path, data: Path, seconds: float) -> int:
                 raise RuntimeError(f"devices did not connect: {rows}")
             time.sleep(0.2)
         acq.start_trial(TrialInfo("bench", "load", "without"))
+        c0, t0 = time.process_time(), time.monotonic()
         time.sleep(seconds)
         latency = acq.live_latency()
+        share = (time.process_time() - c0) / (time.monotonic() - t0)
         info = acq.stop_trial(timeout=60)
     finally:
         acq.close()
-    print(json.dumps({"latency": latency, "trial": info.to_dict()}), flush=True)
+    out = {"latency": latency, "trial": info.to_dict(), "host_cpu_share": round(share, 3)}
+    print(json.dumps(out), flush=True)
     return 0
 
 
@@ -176,7 +180,8 @@ def _run_without(
         raise RuntimeError(f"the acquisition alone failed: {done.stderr[-2000:]}")
     got = json.loads(done.stdout.splitlines()[-1])
     return {"bench": "console_load", "run": "without", "round": n,
-            **_trial(got["trial"], data), **_latency(got["latency"]), **load.result()}  # fmt: skip
+            **_trial(got["trial"], data), **_latency(got["latency"]), **load.result(),
+            "host_cpu_share": got["host_cpu_share"]}  # fmt: skip
 
 
 # ---- with the console and its page in Chromium -------------------------------------------
@@ -199,7 +204,7 @@ def _run_with(
         )
         _call(base, "/api/trials/start", {"subject": "bench", "session": "load", "trial": "with"})
         page.wait_for_function("window.spotlab.status.mode === 'recording'", timeout=30_000)
-        t0 = time.monotonic()
+        t0, c0 = time.monotonic(), _cpu_s(proc.pid)
         # the page's updates over the middle of the trial (after the session's start-up)
         time.sleep(min(2.0, seconds / 4))
         a = page.evaluate("[performance.now(), window.spotlab.frames3d, window.spotlab.messages]")
@@ -207,6 +212,7 @@ def _run_with(
         b = page.evaluate("[performance.now(), window.spotlab.frames3d, window.spotlab.messages]")
         time.sleep(max(0.0, seconds - (time.monotonic() - t0)))
         latency = _call(base, "/api/status")["live_latency"]
+        share = (_cpu_s(proc.pid) - c0) / (time.monotonic() - t0)
         info = _call(base, "/api/trials/stop", {})
     finally:
         page.close()
@@ -217,13 +223,14 @@ def _run_with(
         **_latency(latency),
         "page_3d_fps": round((b[1] - a[1]) / span_s, 1),
         "page_messages_per_s": round((b[2] - a[2]) / span_s, 1), **load.result(),
+        "host_cpu_share": round(share, 3),
     }  # fmt: skip
 
 
 def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     def median(run: str, key: str) -> float | None:
         values = [r[key] for r in rows if r["run"] == run and r[key] is not None]
-        return round(statistics.median(values), 1) if values else None
+        return round(statistics.median(values), 3) if values else None
 
     without, with_ = median("without", "live_p50_us"), median("with", "live_p50_us")
     lost = sum(sum(r["lost"].values()) for r in rows)
@@ -240,6 +247,8 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     p99w, p99 = out["without_live_p99_us"], out["with_live_p99_us"]
     out["p99_ratio"] = None if not p99w or not p99 else round(p99 / p99w, 3)
     out["page_3d_fps"] = fps
+    for run in ("without", "with"):
+        out[f"{run}_host_cpu_share"] = median(run, "host_cpu_share")
     out["loadavg_1min"] = round(statistics.median(r["loadavg_1min"] for r in rows), 2)
     # a hub whose frames span less than 99 % of the trial fell behind: not conclusive
     out["hub_in_real_time"] = min(r["realtime"].get("hub") or 0.0 for r in rows) >= 0.99

@@ -511,7 +511,6 @@ document.getElementById("cal-accept").addEventListener("click", () => calibratio
 
 // ---- the live socket ------------------------------------------------------------------
 let lastMode = null;
-let lastSlow = null;
 function connect() {
   const proto = location.protocol === "https:" ? "wss://" : "ws://";
   const ws = new WebSocket(proto + location.host + "/api/live" + (token ? "?token=" + encodeURIComponent(token) : ""));
@@ -521,25 +520,24 @@ function connect() {
   ws.onmessage = (ev) => {
     const m = JSON.parse(ev.data);
     received.messages += 1;
-    received.status = m.status;
-    received.devices = m.devices;
+    if (m.slow !== undefined) { received.status = m.status; received.devices = m.devices; }
     if (m.markers) {
       received.markers = m.markers;
       received.markerSeqs.push(m.markers.seq);
       if (received.markerSeqs.length > 100) received.markerSeqs.shift();
     }
-    if (m.slow !== lastSlow) {  // the tables and 2-D views are new about 10 times a second
-      lastSlow = m.slow;
+    if (m.slow !== undefined) {  // the tables and 2-D views: about 10 times a second
       showMode(m.status);
       showDevices(m.devices);
       showDeviceChoices(m.devices);
       showBanner(m.status, m.devices);
       show2d(m.views);
     }
-    show3d(m.markers, m.status.cameras);
+    if (!received.status) return;
+    show3d(m.markers, received.status.cameras);
     keepSeries(m.markers);
     showSeries();
-    if (lastMode !== m.status.mode) { lastMode = m.status.mode; refreshTrials(); }
+    if (lastMode !== received.status.mode) { lastMode = received.status.mode; refreshTrials(); }
   };
 }
 
