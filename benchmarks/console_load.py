@@ -23,8 +23,8 @@ process used over the run and the acquiring process over the trial (``host_cpu_s
 the console, or the acquisition alone). A last line (``summary``) gives the medians
 over the rounds and the targets: no frame lost, the latency with the console within
 10 % of the figure without, >= 30 updates a second. ``hub_in_real_time`` false means
-the hub's simulator fell behind 300 Hz (a loaded machine starves it: with its host's
-decoding it needs 0.4-0.8 of a core at 300 Hz), so the run is not conclusive.
+the hub's simulator fell behind 300 Hz (a loaded machine starves it: it needs about a
+third of a core at 300 Hz), so the run is not conclusive.
 
 Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2]``. A shared 2-core
 machine is noisy: the rounds alternate the two runs so that both see the same load.
