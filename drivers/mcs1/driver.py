@@ -135,6 +135,7 @@ class Mcs1Driver(Driver):
         self._streaming = False
         self._stash: list[FrameBlock] = []
         self._recovering: str | None = None
+        self._reconnect_asked: str | None = None
         self._outage_start = 0.0
         self._retime(config)
 
@@ -201,6 +202,16 @@ class Mcs1Driver(Driver):
     def _describe_load(self) -> str:
         """What the configuration asks of the line, for the bandwidth message."""
 
+    def request_reconnect(self, reason: str = "reconnect asked") -> None:
+        """Ask a streaming driver to reconnect as after a lost port; safe from any thread.
+
+        The reader's next :meth:`recv` closes the port and recovers as from a fault
+        (``disconnected`` with ``reason``, the bring-up again, ``reconnected``): the
+        stream, its counters and the recording's taps go on, only this device restarts.
+        Ignored when the driver is not streaming.
+        """
+        self._reconnect_asked = reason
+
     @property
     def recovering(self) -> bool:
         """Whether the driver is reconnecting after a fault."""
@@ -208,6 +219,7 @@ class Mcs1Driver(Driver):
 
     # -- life cycle ----------------------------------------------------------------
     def _start(self) -> None:
+        self._reconnect_asked = None
         try:
             if not self._link.is_open:
                 self._link.open()
@@ -403,6 +415,12 @@ class Mcs1Driver(Driver):
             return None
         if not self._streaming:
             raise DeviceError(f"{self.name} on {self.port} is not streaming: call start() first")
+        if (asked := self._reconnect_asked) is not None:
+            self._reconnect_asked = None
+            self._link.close()
+            self._tap_event("close", port=self.port)
+            self._begin_recovery("disconnected", asked)
+            return None
         try:
             self._read_and_decode(timeout)
         except DeviceDisconnected as exc:

@@ -207,6 +207,16 @@ def test_a_browser_leaving_mid_trial_does_not_end_it(
     page.fill("#seconds", "2")
     page.click("#record")
     page.wait_for_function("window.spotlab.status.mode === 'recording'")
+    # a device reconnected from the page while the trial runs: alone, the trial goes on
+    page.select_option("#device-name", "timer")
+    assert page.is_disabled("#device-reconnect") is False
+    page.click("#device-reconnect")
+    page.wait_for_function(
+        "document.getElementById('device-msg').textContent.includes('reconnects alone')"
+    )
+    # the clock offset of the session's clock model: a dash, or seconds since its start
+    offsets = page.locator("#devices tbody tr td:nth-child(10)").all_inner_texts()
+    assert all(o == "—" or abs(float(o)) < 30 for o in offsets), offsets
     page.close()  # the browser goes away mid-trial
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline:
@@ -256,12 +266,12 @@ def test_the_calibration_wizard_in_the_page(sim_console: tuple[str, Path], brows
     page = browser.new_page(viewport={"width": 1280, "height": 900})
     page.goto(url)
     page.wait_for_function("window.spotlab.calibration && window.spotlab.messages > 0")
-    # first, a device reconnected from the page: the preview starts again and it comes back
+    # first, a device reconnected from the page: it reconnects alone and comes back
     page.select_option("#device-name", "timer")
     assert page.is_disabled("#device-set-rate") is False
     page.click("#device-reconnect")
     page.wait_for_function(
-        "document.getElementById('device-msg').textContent.includes('reconnect asked')"
+        "document.getElementById('device-msg').textContent.includes('reconnects alone')"
     )
     page.wait_for_function(
         "document.querySelectorAll('#devices td.ok').length === 3", timeout=20_000

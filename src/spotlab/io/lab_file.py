@@ -15,6 +15,12 @@ The format (TOML) is described in docs/lab.md::
     [wiring]                    # stream name -> timer input capturing its frame pulses
     selspot0 = 0
 
+    [calibration]               # optional: the lab's wand and reference object
+    wand_length = 500           # mm between the wand's end markers
+    frame_points = "lframe.csv" # the reference object's X, Y, Z (mm), relative to the file
+    wand_markers = [1, 2]       # SELSPOT-style systems: the wand's LED numbers
+    frame_markers = [1, 2, 3, 4]  # ... and the reference object's
+
 :func:`load_lab` checks the structure and the value types; which settings a
 family takes is checked by the command that builds the drivers.
 """
@@ -31,7 +37,8 @@ from spotlab.core.errors import ConfigurationError
 #: A setting's value as TOML gives it.
 SettingValue = bool | int | float | str
 
-TOP_KEYS = ("device", "wiring", "rig", "model")
+TOP_KEYS = ("device", "wiring", "rig", "model", "calibration")
+CALIBRATION_KEYS = ("wand_length", "frame_points", "wand_middle", "wand_markers", "frame_markers")
 DEVICE_KEYS = ("family", "port", "name")
 
 
@@ -66,6 +73,30 @@ class LabDevice:
 
 
 @dataclass(frozen=True)
+class LabCalibration:
+    """The ``[calibration]`` table: the lab's wand and reference object (docs/lab.md).
+
+    Attributes
+    ----------
+    wand_length : float
+        Distance between the wand's end markers, mm.
+    frame_points : Path
+        CSV of the reference object's markers, columns ``X``, ``Y``, ``Z`` in mm.
+    wand_middle : float or None
+        A 3-marker wand's middle marker, mm from end A (video-centroid hubs).
+    wand_markers, frame_markers : tuple of int or None
+        Marker (LED) numbers, 1-based, of the wand's ends and of the reference object's
+        markers (SELSPOT-style systems, whose markers carry numbers).
+    """
+
+    wand_length: float
+    frame_points: Path
+    wand_middle: float | None = None
+    wand_markers: tuple[int, ...] | None = None
+    frame_markers: tuple[int, ...] | None = None
+
+
+@dataclass(frozen=True)
 class Lab:
     """A loaded lab file.
 
@@ -79,6 +110,8 @@ class Lab:
         Stream name -> timer input (0-7) capturing its frame pulses.
     rig, model : Path or None
         The current rig (TOML) and marker model (JSON), resolved against the file's folder.
+    calibration : LabCalibration or None
+        The lab's wand and reference object, for the console's calibration wizard.
     """
 
     path: Path
@@ -86,6 +119,7 @@ class Lab:
     wiring: dict[str, int] = field(default_factory=dict)
     rig: Path | None = None
     model: Path | None = None
+    calibration: LabCalibration | None = None
 
 
 def _fail(path: Path, key: str, message: str) -> LabFileError:
@@ -122,6 +156,49 @@ def _device(path: Path, index: int, table: object) -> LabDevice:
     return LabDevice(table["family"], table["port"], name, settings, f"{path}: {where}")
 
 
+def _length(path: Path, key: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not value > 0:
+        raise _fail(path, key, f"expected a positive length in mm, got {value!r}")
+    return float(value)
+
+
+def _markers(path: Path, key: str, value: object) -> tuple[int, ...] | None:
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or not value
+        or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value)
+    ):
+        raise _fail(path, key, f"expected a list of marker numbers (1, 2, ...), got {value!r}")
+    return tuple(value)
+
+
+def _calibration(path: Path, table: object) -> LabCalibration | None:
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise _fail(path, "calibration", "expected a [calibration] table")
+    unknown = [k for k in table if k not in CALIBRATION_KEYS]
+    if unknown:
+        raise _fail(
+            path, f"calibration.{unknown[0]}", f"unknown key ({', '.join(CALIBRATION_KEYS)})"
+        )
+    for key in ("wand_length", "frame_points"):
+        if key not in table:
+            raise _fail(path, f"calibration.{key}", "missing")
+    points = _path(path, "calibration.frame_points", table["frame_points"])
+    assert points is not None
+    middle = table.get("wand_middle")
+    return LabCalibration(
+        _length(path, "calibration.wand_length", table["wand_length"]),
+        points,
+        None if middle is None else _length(path, "calibration.wand_middle", middle),
+        _markers(path, "calibration.wand_markers", table.get("wand_markers")),
+        _markers(path, "calibration.frame_markers", table.get("frame_markers")),
+    )
+
+
 def load_lab(path: str | os.PathLike[str]) -> Lab:
     """Read and check a lab file.
 
@@ -154,5 +231,10 @@ def load_lab(path: str | os.PathLike[str]) -> Lab:
             raise _fail(p, f"wiring.{stream}", f"expected a timer input 0-7, got {value!r}")
         wiring[stream] = value
     return Lab(
-        p, devices, wiring, _path(p, "rig", data.get("rig")), _path(p, "model", data.get("model"))
+        p,
+        devices,
+        wiring,
+        _path(p, "rig", data.get("rig")),
+        _path(p, "model", data.get("model")),
+        _calibration(p, data.get("calibration")),
     )

@@ -14,12 +14,12 @@ import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
 from spotlab.console.cli import main
-from spotlab.console.commands.calibrate import _check_scale
 from spotlab.console.errors import CommandError
 from spotlab.drivers.centroid import CentroidDriver
 from spotlab.geometry import Camera, Rig
 from spotlab.processing.blob_calibration_inputs import load_blob_recordings
 from spotlab.processing.calibration_inputs import WandObservations
+from spotlab.processing.recording_calibration import check_scale as _check_scale
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
 from spotlab.simulators.motions import reference_markers
 

@@ -86,6 +86,25 @@ def test_link_health_counts_per_second_and_restarts_with_a_session() -> None:
     }
 
 
+def test_the_clock_offset_is_the_session_clock_models() -> None:
+    """Offset: session time minus device time by the arrival fit; drift from its rate."""
+    from spotlab.console.web.live_view import StreamClock
+
+    t0_ns = 5_000_000_000
+    clock = StreamClock(1000.0, t0_ns)  # a 1 kHz device counter
+    assert clock.offset_s is None and clock.drift_ppm is None
+    rng = np.random.default_rng(0)
+    for k in range(1000):  # 10 s at 100 Hz; its zero 2.5 s into the session, 100 ppm fast
+        tick = 123_000 + 10 * k
+        session_s = 2.5 + tick / 1000.0 / (1 + 100e-6) + 0.002 + 0.0005 * rng.random()
+        clock.update(tick, t0_ns + int(session_s * 1e9))
+    offset, drift = clock.offset_s, clock.drift_ppm
+    assert offset is not None and drift is not None
+    # at the last tick (133 s of device time) 100 ppm is 13.3 ms; plus the mean delay
+    assert abs(offset - (2.5 + 0.00225 - 133.0 * 100e-6 / (1 + 100e-6))) < 0.0005, offset
+    assert abs(drift - 100.0) < 30.0, drift
+
+
 def test_gap_counts_of_trajectories() -> None:
     from spotlab.console.web.processing_jobs import gap_counts
 
@@ -283,16 +302,25 @@ def test_a_device_rate_set_and_a_reconnect_from_the_api(
     row = c.until(lambda: (r := selspot())["rate_hz"] == 50.0 and r["frames"] > 100 and r)
     assert row["connected"] and row["rate_settable"], row
     before = selspot()["frames"]
-    assert c.call("/api/devices/timer/reconnect", {})[0] == 202
-    # new driver objects count from zero: seen below the count before, then connected
-    c.until(lambda: selspot()["frames"] < before)
-    c.until(lambda: selspot()["connected"])
-    # refused while a trial is recorded
+    code, body = c.call("/api/devices/timer/reconnect", {})
+    assert code == 202 and body["reconnecting"] == "device" and not body["restarting"], body
+
+    # the timer reconnects alone: selspot's driver counts on, the timer comes back
+    def timer_back() -> dict[str, Any] | None:
+        rows = c.call("/api/devices")[1]["devices"]
+        return next((d for d in rows if d["name"] == "timer" and d["reconnects"] == 1), None)
+
+    timer = c.until(timer_back)
+    assert selspot()["frames"] > before and timer, timer
+    c.until(lambda: all(d["connected"] for d in c.call("/api/devices")[1]["devices"]))
+    # a rate is refused while a trial is recorded, a reconnect is not
     assert c.call("/api/trials/start", {"subject": "S", "session": "s", "trial": "t"})[0] == 201
     c.until(lambda: c.call("/api/status")[1]["mode"] == "recording")
-    assert c.call("/api/devices/selspot/reconnect", {})[0] == 409
+    assert c.call("/api/devices/selspot/reconnect", {})[1]["reconnecting"] == "device"
     assert c.call("/api/devices/selspot/configure", {"rate_hz": 60})[0] == 409
-    assert c.call("/api/trials/stop", {})[0] == 200
+    c.until(lambda: selspot()["reconnects"] == 1 and selspot()["connected"])
+    code, trial = c.call("/api/trials/stop", {})
+    assert code == 200 and trial["state"] == "done" and trial["frames"]["selspot"] > 0, trial
 
 
 def test_missing_port_device_drop_and_token(
@@ -330,6 +358,10 @@ def test_missing_port_device_drop_and_token(
     assert 100 <= t["frames"]["selspot"] <= 250, t  # 1.5 s at 100 Hz, then gone
     assert f"timer: not recorded: port {missing} does not exist" in t["messages"]
     assert any(m.startswith("selspot: no frame in the last") for m in t["messages"]), t
+    # said on stderr too, while it was recorded and when it was finished
+    err = c.err.read_text()
+    assert "spotlab: warning: device selspot stopped sending while trial S.s.t is recorded: " in err
+    assert "spotlab: warning: trial S.s.t: selspot: no frame in the last" in err
     assert c.stop(signal.SIGINT) == 0, c.err.read_text()
 
 
@@ -423,3 +455,49 @@ def test_the_calibration_wizard_on_the_simulated_hub(
     assert code == 200 and state["step"] == "accepted" and state["rig"] == "S01/cal/rig.toml"
     assert (data / "S01" / "cal" / "rig.toml").is_file()
     assert (data / "S01" / "cal" / "rig.candidate.report.png").is_file()
+
+
+def test_one_device_reconnects_alone_while_a_trial_is_recorded(tmp_path: Path) -> None:
+    """Reconnecting one device keeps the session: the other streams on, the same driver
+    objects count on, the trial keeps what it had and records what comes after."""
+    lab = tmp_path / "lab.toml"
+    lab.write_text(
+        '[[device]]\nfamily = "selspot"\nport = "sim://selspot?cameras=2&leds=4&rate=100"\n'
+        "cameras = 2\nleds = 4\n\n"
+        '[[device]]\nfamily = "timer"\nport = "sim://timer?rate=100"\n'
+    )
+    store = TrialStore(tmp_path / "data")
+    warned: list[str] = []
+    acq = Acquisition(plan_lab(lab, False, tmp_path), store, warned.append)
+    acq.start()
+
+    def until(what: Callable[[], Any], timeout: float = 10.0) -> Any:
+        deadline = time.monotonic() + timeout
+        while not (result := what()):
+            assert time.monotonic() < deadline, (acq.devices(), acq.errors, warned)
+            time.sleep(0.02)
+        return result
+
+    try:
+        with pytest.raises(InputError, match="no device"):
+            acq.reconnect("nope")
+        acq.start_trial(TrialInfo("S", "s", "t"))
+        until(lambda: acq.session is not None and acq.trial is not None)
+        session = acq.session
+        selspot, timer = (next(d for d in acq.drivers if d.name == n) for n in ("selspot", "timer"))
+        until(lambda: selspot.stats.frames > 30 and timer.stats.frames > 30)
+        assert acq.reconnect("selspot") == "device"
+        until(lambda: selspot.stats.reconnects == 1)
+        before = {"selspot": selspot.stats.frames, "timer": timer.stats.frames}
+        until(lambda: selspot.stats.frames > before["selspot"] + 30)
+        assert acq.session is session and acq.trial is not None  # neither restarted
+        assert [d.name for d in acq.drivers] == ["selspot", "timer"]
+        assert timer.stats.frames > before["timer"] + 30 and timer.stats.reconnects == 0
+        done = acq.stop_trial()
+    finally:
+        acq.close()
+    assert done.state == "done", done
+    assert done.frames["selspot"] >= before["selspot"] + 30, done  # before and after
+    assert done.frames["timer"] >= before["timer"] + 30, done
+    # an outage the operator asked for is not reported as a device that stopped sending
+    assert not any("selspot stopped sending" in w for w in warned), warned

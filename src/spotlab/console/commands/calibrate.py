@@ -16,11 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from spotlab.calibration import wand_calibrate, write_report_figure
 from spotlab.console.errors import CommandError
-from spotlab.geometry import Rig
 from spotlab.processing.blob_calibration_inputs import BlobCalibrationInputs, load_blob_recordings
 from spotlab.processing.blob_trajectories import is_blob_recording
 from spotlab.processing.calibration_inputs import (
@@ -31,7 +27,7 @@ from spotlab.processing.calibration_inputs import (
 )
 from spotlab.processing.decoding import input_suffix
 from spotlab.processing.paths import check_output_paths
-from spotlab.reconstruction import triangulate
+from spotlab.processing.recording_calibration import calibrate_observations, write_calibration
 
 
 def add_parser(sub: Any) -> None:
@@ -105,12 +101,6 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
-#: Largest relative difference between the reference object's size triangulated with
-#: the calibrated rig (the wand sets the scale) and its published coordinates, for
-#: video-centroid recordings.
-SCALE_MISMATCH = 0.005
-
-
 def _load_blobs(args: argparse.Namespace) -> BlobCalibrationInputs:
     """A video-centroid wand dance and static recording (see the module docstring)."""
     given = [
@@ -162,31 +152,6 @@ def _load(args: argparse.Namespace) -> WandObservations:
     raise CommandError(f"{path}: unknown observation format {suffix!r} (npz, csv or spj)")
 
 
-def _check_scale(rig: Rig, obs: WandObservations, length: float) -> None:
-    """The reference object, triangulated with the rig the wand scaled, must have its size.
-
-    The bundle adjustment holds the wand at ``length`` and the reference object at its
-    coordinates; when the two disagree, the many wand frames win and the object's
-    residuals take the difference. Its markers triangulated from their own images then
-    measure the object at the scale the wand gave.
-    """
-    X = triangulate(rig, obs.frame)
-    ok = np.all(np.isfinite(X), axis=1)
-    if ok.sum() < 2:
-        return
-    i, j = np.triu_indices(int(ok.sum()), 1)
-    measured = np.linalg.norm(X[ok][i] - X[ok][j], axis=1).sum()
-    published = np.linalg.norm(obs.frame_points[ok][i] - obs.frame_points[ok][j], axis=1).sum()
-    scale = float(measured / published)
-    if not abs(scale - 1.0) <= SCALE_MISMATCH:
-        raise CommandError(
-            f"the wand length does not match the recordings: with --wand-length {length:g} mm "
-            f"the reference object measures {100 * scale:.1f} % of its published size, as if "
-            f"the wand were {length / scale:.0f} mm; check the wand's length and the "
-            "reference object's coordinates"
-        )
-
-
 def _print_finder(found: BlobCalibrationInputs) -> None:
     summary = found.summary()
     wand = f"{found.markers} markers"
@@ -222,35 +187,14 @@ def run(args: argparse.Namespace) -> int:
         if verbose:
             print(f"calibrate: {message}", file=sys.stderr, flush=True)
 
-    result = wand_calibrate(
-        obs.wand, length, obs.frame, obs.frame_points, obs.image_size, names=obs.names,
-        distortion=args.distortion, units=obs.units, progress=progress,
-    )  # fmt: skip
-    if found is not None and found.markers == 2:
-        # Two identical markers: name the ends again with this first rig, then adjust again.
-        progress("2-marker wand: naming its ends with the first calibration")
-        found = found.relabel(result.rig, result.wand_ends)
-        obs = found.observations
-        result = wand_calibrate(
-            obs.wand, length, obs.frame, obs.frame_points, obs.image_size, names=obs.names,
-            distortion=args.distortion, units=obs.units, progress=progress,
-        )  # fmt: skip
-    if found is not None:
-        _check_scale(result.rig, obs, length)
+    calibrated = calibrate_observations(
+        obs, length, found, distortion=args.distortion, progress=progress
+    )
+    result, obs, found = calibrated.result, calibrated.observations, calibrated.found
     extra = {"finder": found.summary()} if found is not None else {}
     # The figure first: it is the output most likely to fail (matplotlib), and a rig
     # is written only with its report.
-    write_report_figure(
-        result.rig,
-        obs.wand,
-        result.wand_residuals,
-        result.inliers,
-        result.report,
-        figure_path,
-        frame_points=obs.frame_points,
-    )
-    report_path.write_text(json.dumps({**result.report, **extra}, indent=2) + "\n")
-    result.rig.save(out)
+    write_calibration(calibrated, out, report_path, figure_path)
     if args.json:
         print(json.dumps({**result.report, **extra, "calibration": str(out)}))
         return 0

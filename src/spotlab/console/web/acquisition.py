@@ -73,6 +73,7 @@ class Acquisition:
         self.store = store
         self._warn = warn
         self._warned: set[str] = set()
+        self._reconnect_asked: dict[str, float] = {}  # device -> monotonic s of the ask
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._closed = False
@@ -135,6 +136,26 @@ class Acquisition:
                 self.plan = plan
         self._wake.set()
 
+    def reconnect(self, name: str) -> str:
+        """Reconnect device ``name``: ``"device"`` when it reconnects alone in the running
+        session (an MCS-1 driver: the others keep streaming, a trial being recorded goes
+        on and its journal marks the outage), ``"session"`` when the preview starts
+        again with new driver objects instead (no session runs, or the driver cannot
+        reconnect alone). InputError for no such device, or for a session restart while
+        a trial is being recorded."""
+        session = self.session
+        driver = next((d for d in self.drivers if d.name == name), None)
+        if name not in self.plan.names():
+            raise InputError(f"no device {name!r} in the lab")
+        ask = getattr(driver, "request_reconnect", None)
+        if session is not None and driver in session.devices and callable(ask):
+            self._reconnect_asked[name] = time.monotonic()
+            ask("reconnect asked from the console")
+            self.errors.pop(name, None)
+            return "device"
+        self.restart()
+        return "session"
+
     def stop_trial(self, timeout: float = 20.0) -> TrialInfo:
         """Stop the trial being recorded and wait until its sidecar is final."""
         with self._lock:
@@ -162,11 +183,15 @@ class Acquisition:
         """One row per device of the lab (JSON-safe)."""
         rows = []
         session = self.session
+        trial = self.trial
+        kept = "" if trial is None else f" (trial {trial.id} keeps what arrived)"
         for driver in list(self.drivers):
             name = driver.name
             stats = driver.stats.as_dict()
             age = self.view.last_arrival_s(name)
             clock = self.view.clocks.get(name)
+            offset = None if clock is None else clock.offset_s
+            drift = None if clock is None else clock.drift_ppm
             running = session is not None and name not in self.missing
             rate = None
             try:
@@ -186,16 +211,12 @@ class Acquisition:
                     "resyncs": stats["resyncs"],
                     "reconnects": stats["reconnects"],
                     "rate_settable": "rate" in FAMILY_SETTINGS.get(driver.family, {}),
-                    "clock_offset_s": None if clock is None else round(clock.offset_s, 6),
-                    "clock_drift_ppm": (
-                        None
-                        if clock is None or clock.drift_ppm is None
-                        else round(clock.drift_ppm, 1)
-                    ),
+                    "clock_offset_s": None if offset is None else round(offset, 6),
+                    "clock_drift_ppm": None if drift is None else round(drift, 1),
                     "last_error": self.missing.get(name)
                     or self.errors.get(name)
                     or (
-                        f"no frame for {age:.1f} s"
+                        f"no frame for {age:.1f} s{kept}"
                         if running and age is not None and age >= STALE_S
                         else None
                     ),
@@ -347,7 +368,7 @@ class Acquisition:
         try:
             while True:
                 timeout = RETRY_S if seconds is None else max(0.0, t0 + seconds - time.monotonic())
-                woken = self._wake.wait(min(timeout, RETRY_S))
+                woken = self._wake.wait(min(timeout, RETRY_S if wanted is None else 0.5))
                 if seconds is not None and time.monotonic() - t0 >= seconds:
                     with self._lock:
                         if self._wanted is wanted:
@@ -358,6 +379,7 @@ class Acquisition:
                 if wanted is None and any(not _port_missing(p) for p in self._missing_ports()):
                     break  # a missing device appeared: start again with it
                 self._watch(session)
+                self._watch_stale(wanted)
         finally:
             elapsed = session.status().elapsed_s
             self._watch(session)
@@ -377,6 +399,24 @@ class Acquisition:
     def _watch(self, session: Session) -> None:
         for record in session.errors:
             self.errors[record.stream] = str(record.error)
+
+    def _watch_stale(self, trial: TrialInfo | None) -> None:
+        """Tell stderr, once per device and trial, of a device that stopped sending while
+        ``trial`` is recorded (the page's device row says it too)."""
+        if trial is None:
+            return
+        for d in self.drivers:
+            age = self.view.last_arrival_s(d.name)
+            asked = self._reconnect_asked.get(d.name, -math.inf)
+            reconnecting = time.monotonic() - asked < 10.0  # a reconnect the operator asked
+            if age is not None and age > STALE_S and not reconnecting:
+                message = (
+                    f"device {d.name} stopped sending while trial {trial.id} is recorded: "
+                    "the trial keeps what arrived before"
+                )
+                if message not in self._warned:
+                    self._warned.add(message)
+                    self._warn(message)
 
     def _fail_trial(self, info: TrialInfo, why: str) -> None:
         info.state = "failed"
@@ -405,10 +445,12 @@ class Acquisition:
         for name, why in self.missing.items():
             info.messages.append(f"{name}: not recorded: {why}")
         for name, age in stale.items():
-            info.messages.append(
+            message = (
                 f"{name}: no frame in the last {age:.1f} s of the trial: "
                 "it keeps what arrived before"
             )
+            info.messages.append(message)
+            self._warn(f"trial {info.id}: {message}")
         for stream, error in self.errors.items():
             if stream in info.frames:
                 info.messages.append(f"{stream}: {error}")

@@ -3,7 +3,8 @@
 Every ``/api`` route asks for the token when one is set (header ``Authorization: Bearer
 T`` or query ``?token=T``); the page and its two files are public (they hold no data).
 The WebSocket reads the latest values the acquisition keeps (``live_view``) at
-``LIVE_HZ``; it never waits on, nor is waited for by, the acquisition.
+``LIVE_HZ`` (the 3-D markers; the tables and 2-D views at ``SLOW_HZ``); it never waits
+on, nor is waited for by, the acquisition.
 """
 
 from __future__ import annotations
@@ -34,8 +35,13 @@ from spotlab.processing.errors import InputError
 
 __all__ = ["LIVE_HZ", "make_app"]
 
-#: Messages a second on /api/live (the page draws at this rate at most).
-LIVE_HZ = 30.0
+#: Messages a second on /api/live, each with the latest 3-D markers (the page draws the
+#: 3-D view at this rate at most: above the 30 a second it is to reach).
+LIVE_HZ = 40.0
+#: Messages a second that also hold the status, device rows and 2-D views (``slow``
+#: counts them): encoding, sending and drawing 8 cameras' blobs 40 times a second would
+#: cost the acquisition's interpreter and the browser more than the operator sees.
+SLOW_HZ = 10.0
 STATIC = Path(__file__).parent / "static"
 
 
@@ -89,10 +95,13 @@ def make_app(
         if name not in acq.plan.names():
             return _error(404, f"no device {name!r} in the lab")
         try:
-            acq.restart()
+            how = acq.reconnect(name)
         except InputError as exc:
             return _error(409, str(exc))
-        return JSONResponse({"device": name, "restarting": True}, status_code=202)
+        return JSONResponse(
+            {"device": name, "restarting": how == "session", "reconnecting": how},
+            status_code=202,
+        )
 
     async def configure(request: Request) -> Response:
         if (denied := await guard(request)) is not None:
@@ -121,7 +130,10 @@ def make_app(
         try:
             raw = await body(request)
             if step in ("wand", "lframe"):
-                wizard.record(step, raw.get("subject"), raw.get("session"), raw.get("seconds"))
+                wizard.record(
+                    step, raw.get("subject"), raw.get("session"), raw.get("seconds"),
+                    raw.get("device"),
+                )  # fmt: skip
             elif step == "run":
                 wizard.calibrate()
             elif step == "accept":
@@ -231,20 +243,28 @@ def make_app(
         await ws.accept()
         period = 1.0 / LIVE_HZ
         due = time.monotonic()
+        slow_due, slow = 0.0, 0
         try:
             while True:
-                views = {
-                    name: {"seq": v.seq, "cameras": v.cameras, "units": acq.view.units.get(name)}
-                    for name, v in list(acq.view.views.items())
-                }
-                message = {
-                    "t": time.time(),
-                    "status": acq.status(),
-                    "devices": acq.devices(),
-                    "views": views,
-                    "markers": acq.markers.snapshot(),
-                }
-                await ws.send_text(json.dumps(message))
+                now = time.monotonic()
+                slow_text = ""
+                if now >= slow_due:  # the tables and the 2-D views, at SLOW_HZ
+                    views = {
+                        name: {
+                            "seq": v.seq,
+                            "cameras": v.cameras,
+                            "units": acq.view.units.get(name),
+                        }
+                        for name, v in list(acq.view.views.items())
+                    }
+                    slow += 1
+                    slow_due = now + 1.0 / SLOW_HZ
+                    slow_text = ", " + json.dumps(
+                        {"slow": slow, "status": acq.status(), "devices": acq.devices(),
+                         "views": views}
+                    )[1:-1]  # fmt: skip
+                fast = json.dumps({"t": time.time(), "markers": acq.markers.snapshot()})
+                await ws.send_text(f"{fast[:-1]}{slow_text}}}")
                 # on a fixed grid of 1 / LIVE_HZ (a late message does not delay the next)
                 due = max(due + period, time.monotonic() - period)
                 await asyncio.sleep(max(0.0, due - time.monotonic()))

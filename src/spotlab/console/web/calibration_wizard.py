@@ -1,21 +1,29 @@
 """The calibration wizard of the page: wand dance, L-frame, calibration, accept.
 
-For the simulated lab (``--sim``) it calibrates a video-centroid hub, as
-``spotlab calibrate`` does for centroid recordings (docs/calibration.md): the wand
+It calibrates one camera system of the lab as ``spotlab calibrate`` does
+(docs/calibration.md), through :mod:`spotlab.processing.recording_calibration`: the wand
 dance and the L-frame are recorded as trials of a session (``calib_wand``,
-``calib_lframe``) from a hub of :data:`SIM_CAMERAS` cameras whose scene is the wand
-(``motion=wand``, a 3-marker wand of :data:`WAND_MM` mm) and then the L-frame
-(``motion=lframe``, its marker table written by the simulator); while they are recorded
-the console's session holds that hub alone (the recordings must hold one stream), and
-the lab's devices come back after. The calibration runs in a thread of its own
-(:func:`spotlab.processing.blob_calibration_inputs.load_blob_recordings`, then
-:func:`spotlab.calibration.wand_calibrate` and its report figure) and writes
+``calib_lframe``) while the console's session holds that device alone (a recording for
+calibration holds one stream); the lab's devices come back after.
+
+* A lab file's own device (``--lab``): a video-centroid hub (``centroid``: the wand and
+  the reference object found among its blobs) or a SELSPOT-style system (``selspot``:
+  its LEDs carry numbers), with the wand and reference object of the lab file's
+  ``[calibration]`` table (``wand_length``, ``frame_points``, for SELSPOT
+  ``wand_markers`` and ``frame_markers``; docs/lab.md). The operator waves the wand, then
+  lays the L-frame down.
+* The simulated lab (``--sim``): a simulated hub of :data:`SIM_CAMERAS` cameras whose
+  scene is the wand (``motion=wand``, a 3-marker wand of :data:`WAND_MM` mm), then the
+  L-frame (``motion=lframe``, its marker table written by the simulator), since the
+  simulated SELSPOT system's scene is the gait.
+
+The calibration runs in a thread of its own and writes
 ``DATA/SUBJECT/SESSION/rig.candidate.toml`` with ``.report.json`` and ``.report.png``;
-"Accept" copies it to ``rig.toml`` there, the rig of that session's later processing
-and exports (:meth:`Processor.rig_for`). While the wand is recorded, the share of each
-camera's image where blobs were seen (a :data:`GRID` x :data:`GRID` grid over the
-smallest common sensor size that holds them) is sampled from the live view about 30
-times a second.
+"Accept" copies it to ``rig.toml`` there, the rig of that session's later processing and
+exports (:meth:`Processor.rig_for`). While the wand is recorded, the share of each
+camera's image where it was seen (a :data:`GRID` x :data:`GRID` grid over the image: the
+smallest common sensor size that holds the blobs, or a PSD detector's 4096 x 4096
+counts) is sampled from the live view about 30 times a second.
 """
 
 from __future__ import annotations
@@ -30,14 +38,20 @@ from typing import Any
 
 import numpy as np
 
-from spotlab.calibration import wand_calibrate, write_report_figure
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.lab_setup import LabPlan
 from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo, check_name
 from spotlab.io.lab_file import LabDevice
 from spotlab.processing.blob_calibration_inputs import SENSOR_SIZES, load_blob_recordings
+from spotlab.processing.calibration_inputs import load_recordings
 from spotlab.processing.errors import InputError
+from spotlab.processing.recorded_observations import PSD_IMAGE_SIZE
+from spotlab.processing.recording_calibration import (
+    Calibrated,
+    calibrate_observations,
+    write_calibration,
+)
 
 __all__ = ["GRID", "CalibrationWizard"]
 
@@ -47,8 +61,10 @@ SIM_CAMERAS = 4
 WAND_MM = 500.0
 #: Coverage grid cells per image side.
 GRID = 16
-#: Stream name of the hub while the wizard records.
+#: Stream name of the simulated hub while the wizard records.
 STREAM = "wand_hub"
+#: Device families the wizard calibrates.
+FAMILIES = ("centroid", "selspot")
 
 
 def _sensor(xy: np.ndarray) -> tuple[int, int]:
@@ -79,12 +95,57 @@ class CalibrationWizard:
         self._points: dict[int, list[tuple[float, float]]] = {}
         self._seq = -1
         self._folder: Path | None = None
+        self._device: LabDevice | None = None  # the lab's device calibrated (None: --sim)
+        self._stream = STREAM
 
     # ---- steps (API) ------------------------------------------------------------------
-    def record(self, what: str, subject: object, session: object, seconds: object) -> None:
-        """Record the wand dance (``what="wand"``) or the L-frame (``"lframe"``)."""
-        if not self.lab_plan.simulated:
-            raise InputError("the calibration wizard runs on the simulated lab (--sim) only")
+    def devices(self) -> list[str]:
+        """The lab's devices the wizard can calibrate (stream names; empty for ``--sim``,
+        whose simulated hub it calibrates)."""
+        if self.lab_plan.simulated:
+            return []
+        lab = self.lab_plan.lab
+        names = self.lab_plan.names()
+        return [n for n, d in zip(names, lab.devices, strict=True) if d.family in FAMILIES]
+
+    def _choose(self, device: object) -> tuple[LabDevice | None, str]:
+        """The lab device to calibrate and its stream name (None, STREAM for --sim)."""
+        if self.lab_plan.simulated:
+            if device not in (None, "", STREAM):
+                raise InputError("on the simulated lab the wizard calibrates its own hub")
+            return None, STREAM
+        choices = self.devices()
+        if device in (None, "") and len(choices) == 1:
+            device = choices[0]
+        if device not in choices:
+            raise InputError(
+                f"choose the device to calibrate: one of {', '.join(choices) or 'none'} "
+                f"(families {', '.join(FAMILIES)}), got {device!r}"
+            )
+        lab = self.lab_plan.lab
+        index = self.lab_plan.names().index(str(device))
+        cal = lab.calibration
+        if cal is None:
+            raise InputError(
+                f"lab file {lab.path} has no [calibration] table (wand_length, frame_points; "
+                "docs/lab.md)"
+            )
+        chosen = lab.devices[index]
+        if chosen.family == "selspot" and (cal.wand_markers is None or cal.frame_markers is None):
+            raise InputError(
+                f"lab file {lab.path}: [calibration] needs wand_markers and frame_markers "
+                "for a SELSPOT-style system"
+            )
+        if not cal.frame_points.is_file():
+            raise InputError(f"lab file {lab.path}: calibration.frame_points: no file "
+                             f"{cal.frame_points}")  # fmt: skip
+        return dataclasses.replace(chosen, name=str(device)), str(device)
+
+    def record(
+        self, what: str, subject: object, session: object, seconds: object, device: object = None
+    ) -> None:
+        """Record the wand dance (``what="wand"``) of ``device`` (a stream name of the lab;
+        the only one that can be calibrated by default) or the L-frame (``"lframe"``)."""
         if isinstance(seconds, bool) or not isinstance(seconds, int | float) or seconds <= 0:
             raise InputError("seconds must be a positive number")
         with self.lock:
@@ -95,10 +156,11 @@ class CalibrationWizard:
                 raise InputError(f"the wizard is busy ({step})")
             if what == "wand":
                 sub, ses = check_name("subject", subject), check_name("session", session)
+                if [d.name for d in self.acq.plan.lab.devices] != [self._stream]:
+                    self.lab_plan = self.acq.plan  # the lab's, as set now (a rate included)
+                self._device, self._stream = self._choose(device)
             else:
                 sub, ses = self.state["subject"], self.state["session"]
-            if [d.name for d in self.acq.plan.lab.devices] != [STREAM]:
-                self.lab_plan = self.acq.plan  # the lab's, as set now (a rate set included)
             info = TrialInfo(sub, ses, self._free_name(sub, ses, f"calib_{what}"))
             info.notes = f"calibration wizard: {what}"
             self.acq.restart(self._plan(what))
@@ -109,7 +171,13 @@ class CalibrationWizard:
                 raise
             if what == "wand":
                 self._folder = self.acq.store.resolve(sub, ses)
-                self.state = {"step": "wand", "subject": sub, "session": ses, "coverage": {}}
+                self.state = {
+                    "step": "wand",
+                    "subject": sub,
+                    "session": ses,
+                    "device": self._stream,
+                    "coverage": {},
+                }
                 self._points, self._seq = {}, -1
             self.state.update(step=what, error=None, trial=info.id)
         threading.Thread(target=self._follow, args=(what, info), daemon=True).start()
@@ -145,10 +213,16 @@ class CalibrationWizard:
         if self.state.get("step") == "wand":
             self._sample()
         with self.lock:
-            return json.loads(json.dumps(self.state))
+            state: dict[str, Any] = json.loads(json.dumps(self.state))
+        state["devices"] = self.devices()
+        return state
 
     # ---- work -------------------------------------------------------------------------
     def _plan(self, what: str) -> LabPlan:
+        if self._device is not None:  # the lab's device alone, for both recordings
+            lab = self.lab_plan.lab
+            only = dataclasses.replace(lab, devices=(self._device,), rig=None, model=None)
+            return LabPlan(only, False)
         folder = self.acq.store.root / ".sim"
         url = f"sim://centroid?cameras={SIM_CAMERAS}&rate=100"
         if what == "wand":
@@ -181,9 +255,10 @@ class CalibrationWizard:
                 time.sleep(0.1)
 
     def _sample(self) -> None:
-        view = self.acq.view.views.get(STREAM)
+        view = self.acq.view.views.get(self._stream)
         if view is None:
             return
+        psd = self._device is not None and self._device.family == "selspot"
         with self.lock:
             if view.seq == self._seq:
                 return
@@ -193,7 +268,7 @@ class CalibrationWizard:
             coverage = {}
             for c, pts in self._points.items():
                 xy = np.asarray(pts, dtype=float).reshape(-1, 2)
-                w, h = _sensor(xy)
+                w, h = (int(PSD_IMAGE_SIZE[0]), int(PSD_IMAGE_SIZE[1])) if psd else _sensor(xy)
                 cells = {(int(GRID * x / w), int(GRID * y / h)) for x, y in xy}
                 coverage[f"cam{c + 1}"] = round(len(cells) / GRID**2, 4)
             self.state["coverage"] = coverage
@@ -221,6 +296,27 @@ class CalibrationWizard:
         else:
             self._restart(self._plan("lframe"))  # show the L-frame until it is recorded
 
+    def _calibrated(self, wand: Path, frame: Path) -> Calibrated:
+        """The calibration of the two recordings, as ``spotlab calibrate`` computes it."""
+        if self._device is None:  # the simulated hub
+            points = self.acq.store.root / ".sim" / "lframe.csv"
+            found = load_blob_recordings(wand, frame, points, wand_length=WAND_MM)
+            return calibrate_observations(found.observations, WAND_MM, found)
+        cal = self.lab_plan.lab.calibration
+        assert cal is not None  # checked by _choose
+        option = "wand_length of the lab file's [calibration]"
+        if self._device.family == "centroid":
+            found = load_blob_recordings(
+                wand, frame, cal.frame_points, wand_length=cal.wand_length,
+                wand_middle=cal.wand_middle,
+            )  # fmt: skip
+            return calibrate_observations(
+                found.observations, cal.wand_length, found, length_option=option
+            )
+        assert cal.wand_markers is not None and cal.frame_markers is not None
+        obs = load_recordings(wand, cal.wand_markers, frame, cal.frame_markers, cal.frame_points)
+        return calibrate_observations(obs, cal.wand_length, length_option=option)
+
     def _calibrate(self) -> None:
         store = self.acq.store
         folder = self._folder
@@ -229,22 +325,11 @@ class CalibrationWizard:
                 raise InputError("record the wand dance first")
             wand = store.journal(*store.parse_id(self.state["wand_trial"]))
             frame = store.journal(*store.parse_id(self.state["lframe_trial"]))
-            found = load_blob_recordings(
-                wand, frame, store.root / ".sim" / "lframe.csv", wand_length=WAND_MM
-            )
-            obs = found.observations
-            result = wand_calibrate(
-                obs.wand, WAND_MM, obs.frame, obs.frame_points, obs.image_size,
-                names=obs.names, units=obs.units,
-            )  # fmt: skip
+            calibrated = self._calibrated(wand, frame)
             out = folder / "rig.candidate.toml"
-            write_report_figure(
-                result.rig, obs.wand, result.wand_residuals, result.inliers, result.report,
-                out.with_suffix(".report.png"), frame_points=obs.frame_points,
-            )  # fmt: skip
-            report = {**result.report, "finder": found.summary()}
-            out.with_suffix(".report.json").write_text(json.dumps(report, indent=2) + "\n")
-            result.rig.save(out)
+            report = write_calibration(
+                calibrated, out, out.with_suffix(".report.json"), out.with_suffix(".report.png")
+            )
         except Exception as exc:  # an input or numerics error, told to the page
             with self.lock:
                 self.state.update(step="failed", error=str(exc) or type(exc).__name__)

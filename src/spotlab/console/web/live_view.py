@@ -18,10 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from spotlab.acquisition.clocks import ArrivalDejitter, ClockSegment
 from spotlab.acquisition.interfaces import Device, SinkBase
+from spotlab.core.errors import ClockError
 from spotlab.core.frames import FrameBlock
 
-__all__ = ["ClockPair", "MarkerSlot", "StreamView", "ViewSink"]
+__all__ = ["MarkerSlot", "StreamClock", "StreamView", "ViewSink"]
 
 
 @dataclass(frozen=True)
@@ -44,38 +46,66 @@ class StreamView:
     cameras: list[list[list[float]]]
 
 
-@dataclass(frozen=True)
-class ClockPair:
-    """First and latest (device time, host arrival) of a stream, s.
+class StreamClock:
+    """The session's clock model of one stream: device ticks to session time.
 
-    The offset is device time minus host arrival time at the latest frame; the drift is
-    the device clock's rate against the host's since the first (taken 1 s after the
-    stream's first frame: start-up arrives in bursts), in ppm, from 5 s on (arrival
-    stamps: millisecond-level, so meaningful after a minute or so).
+    The console has no timer edges live, so its model is the one ``spotlab export``
+    falls back to for a stream without a timer input: an online line fit of host
+    arrival times against device ticks (:class:`ArrivalDejitter`, liblsl's dejitter;
+    docs/synchronisation.md), on the session's reference: the host's monotonic clock, 0
+    at the session's start. :class:`ViewSink` fits a block's last frame, at most
+    :data:`CLOCK_HZ` times a second.
+
+    Parameters
+    ----------
+    tick_hz : float
+        The device's tick rate, Hz.
+    t0_ns : int
+        The session's start, ``time.monotonic_ns`` ns.
     """
 
-    first_dev_s: float
-    first_host_s: float
-    dev_s: float
-    host_s: float
+    def __init__(self, tick_hz: float, t0_ns: int) -> None:
+        self.tick_hz = tick_hz
+        self.t0_ns = t0_ns
+        self._fit = ArrivalDejitter(tick_hz, allow_resets=True)
+        self._first_s: float | None = None
+        #: Session time minus device time (ticks / tick rate) at the latest pair, s, by
+        #: the model (None before it has enough pairs): where the device clock's zero
+        #: lies on the session's time line. Two streams' difference is their clocks'.
+        self.offset_s: float | None = None
+        #: The device clock's rate against the session's, ppm, by the model (None
+        #: before 5 s of pairs: arrival stamps are millisecond-level).
+        self.drift_ppm: float | None = None
 
-    @property
-    def offset_s(self) -> float:
-        """Device time minus host arrival time, s."""
-        return self.dev_s - self.host_s
-
-    @property
-    def drift_ppm(self) -> float | None:
-        """Device clock rate against the host's, ppm (None before 5 s)."""
-        span = self.host_s - self.first_host_s
-        if span < 5.0:
-            return None
-        return ((self.dev_s - self.first_dev_s) / span - 1.0) * 1e6
+    def update(self, tick: int, arrival_ns: int) -> None:
+        """Fit one (device tick, host arrival) pair; the offset and drift follow."""
+        t = (arrival_ns - self.t0_ns) / 1e9
+        try:
+            self._fit.update(np.array([tick], dtype=np.int64), np.array([t]))
+        except ClockError:  # ticks that repeat: start the fit again
+            self._fit = ArrivalDejitter(self.tick_hz, allow_resets=True)
+            self._first_s = None
+            self.offset_s = self.drift_ppm = None
+            return
+        if self._first_s is None:
+            self._first_s = t
+        try:
+            seg: ClockSegment = self._fit.model.segments[-1]
+        except ClockError:  # too few pairs yet
+            return
+        self.offset_s = (
+            float(seg.seconds(np.array([tick], dtype=np.int64))[0]) - tick / self.tick_hz
+        )
+        if t - self._first_s >= 5.0:
+            self.drift_ppm = (1.0 / (seg.rate * self.tick_hz) - 1.0) * 1e6
 
 
 #: Stream kinds with a 2-D view (a timer has none).
 VIEWED = ("image2d", "blobs2d")
-#: Seconds after a stream's first frame at which its clock pair is anchored.
+#: Pairs a second a stream's clock model is fitted with at most.
+CLOCK_HZ = 10.0
+#: Seconds after a stream's first frame before its clock is fitted (the frames of the
+#: first second arrive in bursts: start-up dialogue, queued frames).
 ANCHOR_AFTER_S = 1.0
 
 
@@ -99,7 +129,9 @@ class ViewSink(SinkBase):
 
     def __init__(self, max_rate_hz: float = 30.0) -> None:
         self.views: dict[str, StreamView] = {}
-        self.clocks: dict[str, ClockPair] = {}
+        self.clocks: dict[str, StreamClock] = {}
+        self._t0_ns = time.monotonic_ns()  # the session's reference: 0 s here
+        self._fitted_ns: dict[str, int] = {}
         self.units: dict[str, str] = {}
         self._columns: dict[str, tuple[int, int]] = {}
         self._tick_hz: dict[str, float] = {}
@@ -125,15 +157,14 @@ class ViewSink(SinkBase):
         self._arrival_ns[stream] = arrival
         tick_hz = self._tick_hz.get(stream, 0.0)
         if tick_hz > 0:
-            dev_s, host_s = float(block.ticks[-1]) / tick_hz, arrival / 1e9
-            old = self.clocks.get(stream)
-            seen = self._seen_s.setdefault(stream, host_s)
-            if old is None or old.first_host_s - seen < ANCHOR_AFTER_S:
-                # the frames of the first second arrive in bursts (start-up): anchor later
-                first = (dev_s, host_s)
-            else:
-                first = (old.first_dev_s, old.first_host_s)
-            self.clocks[stream] = ClockPair(first[0], first[1], dev_s, host_s)
+            seen = self._seen_s.setdefault(stream, arrival / 1e9)
+            if arrival / 1e9 - seen >= ANCHOR_AFTER_S:
+                clock = self.clocks.get(stream)
+                if clock is None:
+                    clock = self.clocks[stream] = StreamClock(tick_hz, self._t0_ns)
+                if arrival - self._fitted_ns.get(stream, 0) >= 1e9 / CLOCK_HZ:
+                    self._fitted_ns[stream] = arrival
+                    clock.update(int(block.ticks[-1]), arrival)
         kind = self._kinds.get(stream)
         if kind not in VIEWED:
             return

@@ -3,7 +3,8 @@
 
 const token = new URLSearchParams(location.search).get("token");
 // What the page received, for the operator's scripts and the browser tests.
-const received = { messages: 0, markers: null, markerSeqs: [], status: null };
+// frames3d: 3-D frames drawn (each a new marker frame), for the load benchmark.
+const received = { messages: 0, markers: null, markerSeqs: [], status: null, frames3d: 0 };
 window.spotlab = received;
 
 function api(path, options = {}) {
@@ -60,14 +61,16 @@ function showDeviceChoices(devices) {
   }
   const d = devices.find((x) => x.name === select.value);
   document.getElementById("device-set-rate").disabled = recording || !(d && d.rate_settable);
-  document.getElementById("device-reconnect").disabled = recording;
+  // a device reconnects alone in the running session, a trial being recorded goes on
+  document.getElementById("device-reconnect").disabled = false;
 }
 
 function deviceAction(what, body) {
   const name = document.getElementById("device-name").value;
   say("device-msg", name + ": " + what + "…");
   api("/api/devices/" + encodeURIComponent(name) + "/" + what, { method: "POST", body: JSON.stringify(body) })
-    .then(() => say("device-msg", name + ": " + what + " asked; the devices start again"))
+    .then((r) => say("device-msg", name + ": " + what + " asked; " + (r.reconnecting === "device"
+      ? "it reconnects alone, the others go on" : "the devices start again")))
     .catch((e) => say("device-msg", name + ": " + e.message, true));
 }
 document.getElementById("device-reconnect").addEventListener("click", () => deviceAction("reconnect", {}));
@@ -121,7 +124,7 @@ function show2d(views) {
 }
 
 // ---- 3-D view ------------------------------------------------------------------------
-const view = { az: -0.9, el: 0.45, dist: 9000, half: 2500 };
+const view = { az: -0.9, el: 0.45, dist: 9000, half: 2500, drawnSeq: null };
 function project(p, c) {
   const [x, y, z] = p;
   const ca = Math.cos(view.az), sa = Math.sin(view.az);
@@ -164,6 +167,7 @@ function show3d(markers, cameras) {
     g.fillText(cam.name, x + 6, y + 10);
   }
   if (!markers) return;
+  if (markers.seq !== view.drawnSeq) { view.drawnSeq = markers.seq; received.frames3d += 1; }
   markers.points.forEach((p, i) => {
     if (!p) return;
     const [x, y] = project(p, c);
@@ -443,6 +447,13 @@ function showCalibration(c) {
   if (c.error) text += ": " + c.error;
   say("cal-step", text, c.step === "failed");
   document.getElementById("cal-wand").disabled = busy;
+  const select = document.getElementById("cal-device");  // a lab file's camera systems
+  const choices = c.devices || [];
+  if (Array.from(select.options).map((o) => o.value).join("\n") !== choices.join("\n")) {
+    select.replaceChildren(...choices.map((n) => el("option", { value: n }, n)));
+  }
+  if (c.device && choices.includes(c.device)) select.value = c.device;
+  document.getElementById("cal-device-label").hidden = choices.length === 0;
   document.getElementById("cal-lframe").disabled = busy || !["wand_done", "lframe_done", "failed"].includes(c.step) || !c.wand_trial;
   document.getElementById("cal-run").disabled = busy || !c.lframe_trial || c.step === "accepted";
   document.getElementById("cal-accept").disabled = c.step !== "calibrated";
@@ -488,6 +499,7 @@ function calibrationStep(step, body) {
     .catch((e) => say("cal-step", e.message, true));
 }
 document.getElementById("cal-wand").addEventListener("click", () => calibrationStep("wand", {
+  device: document.getElementById("cal-device").value || null,
   subject: document.getElementById("cal-subject").value, session: document.getElementById("cal-session").value,
   seconds: Number(document.getElementById("cal-wand-seconds").value),
 }));
@@ -508,22 +520,24 @@ function connect() {
   ws.onmessage = (ev) => {
     const m = JSON.parse(ev.data);
     received.messages += 1;
-    received.status = m.status;
-    received.devices = m.devices;
+    if (m.slow !== undefined) { received.status = m.status; received.devices = m.devices; }
     if (m.markers) {
       received.markers = m.markers;
       received.markerSeqs.push(m.markers.seq);
       if (received.markerSeqs.length > 100) received.markerSeqs.shift();
     }
-    showMode(m.status);
-    showDevices(m.devices);
-    showDeviceChoices(m.devices);
-    showBanner(m.status, m.devices);
-    show2d(m.views);
-    show3d(m.markers, m.status.cameras);
+    if (m.slow !== undefined) {  // the tables and 2-D views: about 10 times a second
+      showMode(m.status);
+      showDevices(m.devices);
+      showDeviceChoices(m.devices);
+      showBanner(m.status, m.devices);
+      show2d(m.views);
+    }
+    if (!received.status) return;
+    show3d(m.markers, received.status.cameras);
     keepSeries(m.markers);
     showSeries();
-    if (lastMode !== m.status.mode) { lastMode = m.status.mode; refreshTrials(); }
+    if (lastMode !== received.status.mode) { lastMode = received.status.mode; refreshTrials(); }
   };
 }
 
