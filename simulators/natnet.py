@@ -36,6 +36,7 @@ import numpy.typing as npt
 
 from spotlab.simulators import natnet_wire as nw
 from spotlab.simulators.natnet_scene import MODEL_ID, NatNetScene
+from spotlab.simulators.priority import raise_serving_priority
 
 F64 = npt.NDArray[np.float64]
 
@@ -305,6 +306,7 @@ class NatNetServer:
         return k - base
 
     def _run(self) -> None:
+        raise_serving_priority()
         while not self._stop.is_set():
             now = time.monotonic()
             due = self._start_s + self._next / self.scene.rate_hz / self.clock_rate

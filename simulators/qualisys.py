@@ -43,6 +43,7 @@ from spotlab.simulators import qualisys_wire as qw
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import LabPublisher, lab_dir
+from spotlab.simulators.priority import raise_serving_priority
 from spotlab.simulators.qualisys_commands import VERSIONS, Client, QtmDialogue
 from spotlab.simulators.qualisys_scene import QualisysScene, SceneFrame
 
@@ -241,6 +242,7 @@ class QualisysServer(QtmDialogue):
 
     # -- the event loop ----------------------------------------------------------
     def _run(self) -> None:
+        raise_serving_priority()
         loop = asyncio.new_event_loop()
         self._loop = loop
         try:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from spotlab.simulators import wsx_wire as w
+from spotlab.simulators.priority import raise_serving_priority
 from spotlab.simulators.wsx_device import NO_DEVICE, WsxDevice, parse_faults
 from spotlab.simulators.wsx_scene import WsxScene
 
@@ -147,6 +148,7 @@ class WsxServer:
             self._threads.append(t)
 
     def _serve(self, conn: socket.socket) -> None:
+        raise_serving_priority()
         session = _Session(self.device)
         try:
             while not self._stop.is_set():

@@ -67,6 +67,12 @@ def no_leaks() -> Iterator[None]:
         pytest.fail("; ".join(problems), pytrace=False)
 
 
+#: Simulators stand in for devices, which have processors of their own: their serving
+#: threads run at a higher priority than the suite's other work where the system allows
+#: (simulators/priority.py), so two busy workers on two cores do not make them late.
+#: Set before any test starts one, in this process and the ``spotlab sim`` children.
+os.environ.setdefault("SPOTLAB_SIM_NICE", "-10")
+
 #: The reference data (../shared/data, or $SPOTLAB_SHARED_DATA where it lives elsewhere).
 SHARED_DATA = Path(os.environ.get("SPOTLAB_SHARED_DATA") or SHARED / "data")
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from spotlab.simulators.line import Segment, garble
 from spotlab.simulators.mcs1_device import Mcs1Device
+from spotlab.simulators.priority import raise_serving_priority
 
 TCGETS2 = 0x802C542A  # _IOR('T', 0x2A, struct termios2) on Linux
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
@@ -166,6 +167,7 @@ class PtyServer:
 
     # -- serving -----------------------------------------------------------------
     def _run(self) -> None:
+        raise_serving_priority()
         served: int | None = None
         while not self._stop.is_set():
             # A device that fell behind (its host is busy) catches up in steps, its

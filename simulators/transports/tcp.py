@@ -18,6 +18,7 @@ import time
 from types import TracebackType
 
 from spotlab.simulators.mcs1_device import Mcs1Device
+from spotlab.simulators.priority import raise_serving_priority
 
 MIN_WAIT_S = 0.002  # a USB-serial adapter delivers in ms chunks too (FTDI: 1-16 ms)
 MAX_WAIT_S = 0.05
@@ -113,6 +114,7 @@ class TcpServer:
         self.stats["clients"] += 1
 
     def _run(self) -> None:
+        raise_serving_priority()
         while not self._stop.is_set():
             now = time.monotonic_ns()
             down = self.device.link_down(now)
