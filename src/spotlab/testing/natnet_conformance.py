@@ -18,7 +18,6 @@ import time
 
 import numpy as np
 
-from spotlab.core.frames import FrameBlock
 from spotlab.drivers.natnet import NatNetDriver
 from spotlab.drivers.natnet.wire import (
     NAT_DISCONNECT,
@@ -31,21 +30,10 @@ from spotlab.drivers.natnet.wire import (
     request,
     split_packet,
 )
+from spotlab.testing.streaming import collect
 
 #: Seconds of frames the streaming tests collect.
 SECONDS = 3.0
-
-
-def collect(driver: NatNetDriver, seconds: float) -> FrameBlock:
-    """The frames a started driver receives in ``seconds`` s."""
-    blocks: list[FrameBlock] = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        block = driver.recv(timeout=0.2)
-        if block is not None and len(block):
-            blocks.append(block)
-    assert blocks, f"no frame within {seconds} s"
-    return FrameBlock.concat(blocks)
 
 
 def ask_raw(

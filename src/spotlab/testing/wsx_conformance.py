@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import errno
 import re
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
@@ -25,7 +24,6 @@ import pytest
 import usb.core
 import usb.util
 
-from spotlab.core.frames import FrameBlock
 from spotlab.drivers.wsx import WsxDriver
 from spotlab.drivers.wsx.protocol import (
     CALIBRATION,
@@ -41,6 +39,7 @@ from spotlab.drivers.wsx.protocol import (
     parse_calibration,
 )
 from spotlab.drivers.wsx.usbio import open_hub, parse_port, release
+from spotlab.testing.streaming import collect
 
 
 @contextmanager
@@ -140,16 +139,4 @@ def refused_code_of_missing_sensor(dev: Any, sensors: int) -> int:
     return 0
 
 
-def collect(driver: WsxDriver, seconds: float) -> FrameBlock:
-    """The frames a started driver receives in ``seconds`` s."""
-    blocks: list[FrameBlock] = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        block = driver.recv(timeout=0.2)
-        if block is not None and len(block):
-            blocks.append(block)
-    assert blocks, f"no frame within {seconds} s"
-    return FrameBlock.concat(blocks)
-
-
-__all__ = ["WsxConformance", "collect", "hub", "refused_code"]
+__all__ = ["WsxConformance", "hub", "refused_code"]
