@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.hil.labelling import score_labelling
+from spotlab.hil.memory import MemorySampler, memory_figures, sample_interval
 from spotlab.hil.processes import (
     CLI,
     RunningSim,
@@ -64,8 +65,11 @@ def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
     return path
 
 
-def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str, Any]:
-    """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process."""
+def _record(
+    lab: Path, journal: Path, seconds: float, folder: Path, sims: list[RunningSim]
+) -> dict[str, Any]:
+    """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process,
+    the memory of it and of the simulators sampled meanwhile (``DIR/memory.csv``)."""
     out, err = folder / "record.stdout", folder / "record.stderr"
     argv = [
         *CLI,
@@ -81,6 +85,8 @@ def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str,
     ]  # fmt: skip  (the run's own folder)
     with open(out, "wb") as fo, open(err, "wb") as fe:
         proc = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
+    pids = {"record": proc.pid} | {s.device.name: s.proc.pid for s in sims}
+    sampler = MemorySampler(pids, sample_interval(seconds)).start()
     try:
         code = proc.wait(timeout=seconds + 120)
     except BaseException:  # Ctrl-C or the time-out: the recorder closes its journal on SIGINT
@@ -92,9 +98,13 @@ def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str,
                 proc.kill()
                 proc.wait()
         raise
+    finally:
+        sampler.stop()
+        sampler.write_csv(folder / "memory.csv")
     errors = [ln for ln in err.read_text(errors="replace").splitlines()
               if ln.startswith("spotlab: error:")]  # fmt: skip
-    return {"record_exit_code": code, "record_error": errors[0] if errors else None}
+    return {"record_exit_code": code, "record_error": errors[0] if errors else None,
+            **memory_figures(sampler.samples, seconds)}  # fmt: skip
 
 
 def _process(
@@ -173,7 +183,7 @@ def run_scenario(
         summary["run"]["simulator_pids"] = {s.device.name: s.proc.pid for s in sims}
         lab = write_lab(scenario, sims, folder / "lab.toml")
         progress(f"recording {scenario.duration_s:g} s")
-        summary["run"].update(_record(lab, journal, scenario.duration_s, folder))
+        summary["run"].update(_record(lab, journal, scenario.duration_s, folder, sims))
         codes = stop_simulators(sims)
         summary["run"]["simulator_exit_codes"] = codes
         if not journal.is_file():  # a journal ended by an error is scored (record_exit_code)
@@ -184,7 +194,8 @@ def run_scenario(
             summary["devices"] = device_figures(journal, logs)
             truths = {s.device.name: (s.device.family, s.truth) for s in sims
                       if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
-            for name, figures in frame_latency(journal, truths).items():
+            timeline = folder / "latency.csv"
+            for name, figures in frame_latency(journal, truths, timeline).items():
                 summary["devices"].setdefault(name, {}).update(figures)
             summary["run"].update(_process(scenario, sims, journal, folder))
     except KeyboardInterrupt:

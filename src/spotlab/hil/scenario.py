@@ -61,7 +61,9 @@ MOTIONS = ("wand", "cluster", "gait", "lframe")
 DEVICE_FIGURES = ("frames", "frames_sent", "frames_missing", "lost_frames", "crc_errors",
                   "resyncs", "duplicates", "gaps", "reconnects", "faults_injected",
                   "rate_hz", "latency_p50_ms", "latency_p99_ms", "latency_max_ms",
-                  "startup_backlog_ms")  # fmt: skip
+                  "startup_backlog_ms", "latency_p50_start_ms", "latency_p50_end_ms",
+                  "latency_p99_start_ms", "latency_p99_end_ms",
+                  "latency_p50_growth_ms")  # fmt: skip
 #: Figures of the run, and what each needs.
 RUN_FIGURES = {
     "sync_error_us": "a timer with wired inputs and the 'timestamps' step",
@@ -72,6 +74,10 @@ RUN_FIGURES = {
     "wrong_label_fraction": "a single device, a centroid hub, and the 'labelling' step",
     "label_error_rms_mm": "a single device, a centroid hub, and the 'labelling' step",
     "record_exit_code": "",
+    "record_rss_start_mb": "",
+    "record_rss_end_mb": "",
+    "record_rss_growth_mb": "",
+    "record_rss_peak_mb": "",
 }
 BOUNDS = ("min", "max")
 
