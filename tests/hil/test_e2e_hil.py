@@ -145,6 +145,19 @@ def test_a_busy_port_and_an_unknown_key_are_one_line_naming_file_line_and_key(
     assert "hil-one" not in os.listdir(Path.cwd())
 
 
+def test_a_device_that_cannot_start_is_one_line_naming_file_line_and_device(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "nostart.toml"
+    path.write_text(
+        'duration = 3\n\n[[device]]\nfamily = "selspot"\nname = "a"\n'
+        '[device.sim]\nfaults = "explode@1"\n'
+    )
+    line = _one_error_in_process(["hil", "run", str(path), "--report", str(tmp_path / "r")], capsys)
+    assert f"{path}:3: device[0]: the selspot simulator did not start: --faults" in line, line
+    assert "unknown kind 'explode'" in line, line
+
+
 def test_pytest_hil_collects_scenarios_by_name_and_folder_and_nothing_else(
     tmp_path: Path,
 ) -> None:

@@ -27,6 +27,7 @@ from typing import Any
 
 from spotlab.hil.labelling import score_labelling
 from spotlab.hil.memory import MemorySampler, memory_figures, sample_interval
+from spotlab.hil.preparation import PreparationError, Prepared, prepare
 from spotlab.hil.processes import (
     CLI,
     RunningSim,
@@ -37,6 +38,7 @@ from spotlab.hil.processes import (
 from spotlab.hil.report import write_html, write_junit, write_summary
 from spotlab.hil.scenario import Scenario
 from spotlab.hil.scoring import device_figures, frame_latency, score_reconstruction, sync_error
+from spotlab.hil.streams import one_stream
 
 
 def _toml_value(value: Any) -> str:
@@ -44,14 +46,19 @@ def _toml_value(value: Any) -> str:
         value, bool) else str(value)  # fmt: skip
 
 
-def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
-    """The lab file of the running simulators (docs/lab.md)."""
+def write_lab(
+    scenario: Scenario, sims: list[RunningSim], path: Path, learnt: Path | None = None
+) -> Path:
+    """The lab file of the running simulators (docs/lab.md); its marker model is the
+    scenario's, else ``learnt`` (the ``model`` step's), else, for the ``labelling`` step,
+    the hub simulator's own."""
     lines = []
     if scenario.rig is not None:
         lines.append(f"rig = {json.dumps(str(scenario.rig))}")
-    model = scenario.model
-    if model is None and "labelling" in scenario.steps:  # the hub simulator's own model
-        model = sims[0].truth.parent / f"{sims[0].device.name}.model.json"
+    model = scenario.model or learnt
+    hubs = [s for s in sims if s.device.family == "centroid"]
+    if model is None and "labelling" in scenario.steps and hubs:
+        model = hubs[0].truth.parent / f"{hubs[0].device.name}.model.json"
     if model is not None:
         lines.append(f"model = {json.dumps(str(model))}")
     for sim in sims:
@@ -108,9 +115,15 @@ def _record(
 
 
 def _process(
-    scenario: Scenario, sims: list[RunningSim], journal: Path, folder: Path
-) -> dict[str, Any]:
+    scenario: Scenario,
+    sims: list[RunningSim],
+    journal: Path,
+    folder: Path,
+    prepared: Prepared,
+) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The processing steps and their scores: the run's figures, and each device's."""
     run: dict[str, Any] = {}
+    per: dict[str, dict[str, Any]] = {}
     if "timestamps" in scenario.steps:
         truths = {s.device.name: (s.device.family, s.truth) for s in sims
                   if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
@@ -119,24 +132,49 @@ def _process(
         run["sync_error_timed_us"] = found["sync_error_timed_us"]
         run["sync_error_per_stream_us"] = found["per_stream_us"]
         run["timebase_notes"] = found["notes"]
-    if "reconstruction" in scenario.steps:
-        (sim,) = sims
-        assert sim.rig is not None
-        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
-        found = score_reconstruction(journal, sim.rig, sim.truth, c3d)
-        run["error_3d_rms_mm"] = found["error_rms_mm"]
-        run["error_3d_max_mm"] = found["error_max_mm"]
-        run["markers_reconstructed"] = found["markers_reconstructed"]
+    alone = len(sims) == 1
+    for sim in sims:
+        name, family = sim.device.name, sim.device.family
+        recon = family == "selspot" and "reconstruction" in scenario.steps
+        label = family == "centroid" and "labelling" in scenario.steps
+        if not (recon or label):
+            continue
+        rig = prepared.rigs.get(name, sim.rig)
+        assert rig is not None
+        stream = journal if alone else one_stream(journal, name, folder / f"{name}.spj")
+        stem = scenario.path.stem if alone else f"{scenario.path.stem}.{name}"
+        c3d = folder / f"{stem}.c3d" if "export" in scenario.steps else None
+        figures: dict[str, Any]
+        if recon:
+            found = score_reconstruction(stream, rig, sim.truth, c3d)
+            figures = {"error_3d_rms_mm": found["error_rms_mm"],
+                       "error_3d_max_mm": found["error_max_mm"],
+                       "markers_reconstructed": found["markers_reconstructed"]}  # fmt: skip
+            if name in prepared.rigs and sim.rig is not None:  # scoring: the floor of the error
+                figures.update(_against_true_rig(stream, sim.rig, sim.truth, figures))
+        else:
+            model = prepared.models.get(name)
+            if model is None and not alone:  # the hub simulator's own model (lab.toml's)
+                model = sim.truth.parent / f"{name}.model.json"
+            figures = score_labelling(stream, rig, sim.truth, c3d, model)
+        figures["rig"] = "calibrated" if name in prepared.rigs else "true"
         if c3d is not None:
-            run["c3d"] = str(c3d)
-    if "labelling" in scenario.steps:
-        (sim,) = sims
-        assert sim.rig is not None
-        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
-        run.update(score_labelling(journal, sim.rig, sim.truth, c3d))
-        if c3d is not None:
-            run["c3d"] = str(c3d)
-    return run
+            figures["c3d"] = str(c3d)
+        per[name] = figures
+        if alone:
+            run.update(figures)
+    return run, per
+
+
+def _against_true_rig(
+    journal: Path, true_rig: Path, truth: Path, calibrated: dict[str, Any]
+) -> dict[str, Any]:
+    """The same trial reconstructed with the simulator's true rig (scoring only): its RMS
+    error, and the calibrated rig's RMS error over it (``error_3d_excess``)."""
+    floor = score_reconstruction(journal, true_rig, truth)["error_rms_mm"]
+    mine = calibrated["error_3d_rms_mm"]
+    excess = mine / floor if mine is not None and floor else None
+    return {"error_3d_rms_true_rig_mm": floor, "error_3d_excess": excess}
 
 
 def _criteria(
@@ -177,11 +215,16 @@ def run_scenario(
     }  # fmt: skip
     journal = folder / "run.spj"
     sims: list[RunningSim] = []
+    prepared = Prepared()
     try:
+        prepared = prepare(scenario, seed, folder, progress)
+        for name, figures in prepared.figures.items():
+            summary["devices"].setdefault(name, {}).update(figures)
         progress(f"starting {len(scenario.devices)} simulator(s)")
         sims = start_simulators(scenario, seed, folder)
         summary["run"]["simulator_pids"] = {s.device.name: s.proc.pid for s in sims}
-        lab = write_lab(scenario, sims, folder / "lab.toml")
+        learnt = next(iter(prepared.models.values()), None)
+        lab = write_lab(scenario, sims, folder / "lab.toml", learnt)
         progress(f"recording {scenario.duration_s:g} s")
         summary["run"].update(_record(lab, journal, scenario.duration_s, folder, sims))
         codes = stop_simulators(sims)
@@ -191,13 +234,19 @@ def run_scenario(
         else:
             progress("processing and scoring against the truth")
             logs = {s.device.name: s.fault_log for s in sims}
-            summary["devices"] = device_figures(journal, logs)
+            for name, figures in device_figures(journal, logs).items():
+                summary["devices"].setdefault(name, {}).update(figures)
             truths = {s.device.name: (s.device.family, s.truth) for s in sims
                       if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
             timeline = folder / "latency.csv"
             for name, figures in frame_latency(journal, truths, timeline).items():
                 summary["devices"].setdefault(name, {}).update(figures)
-            summary["run"].update(_process(scenario, sims, journal, folder))
+            run, per = _process(scenario, sims, journal, folder, prepared)
+            summary["run"].update(run)
+            for name, figures in per.items():
+                summary["devices"].setdefault(name, {}).update(figures)
+    except PreparationError as exc:
+        summary["problem"] = f"preparation failed: {exc}"
     except KeyboardInterrupt:
         summary["problem"] = "interrupted (Ctrl-C): partial report"
         raise
