@@ -1,12 +1,18 @@
-"""Run a scenario: simulators as processes, ``spotlab record``, processing, scoring, report.
+"""Run a scenario: preparation, simulators as processes, ``spotlab record``, processing,
+scoring, report.
 
+0. the lab's preparation, when the scenario asks for it: each system calibrated from
+   its own wand dance and L-frame, the hub's marker model learnt from a static trial
+   and a range of motion (:mod:`spotlab.hil.preparation`);
 1. every simulator starts as its own ``spotlab sim`` process on a real pty or TCP
    port (:mod:`spotlab.hil.processes`);
 2. a lab file naming their addresses, settings and the timer's wiring is written and
-   recorded by ``spotlab record --lab`` in its own process, as in a lab;
+   recorded by ``spotlab record --lab`` in its own process, as in a lab, while the
+   memory of it and of the simulators is sampled (:mod:`spotlab.hil.memory`);
 3. the simulators are stopped (they write their truth and fault logs);
 4. the processing steps run through :mod:`spotlab.processing` (session times,
-   reconstruction with the simulator's true rig, C3D export), then the figures are
+   reconstruction of every SELSPOT system and labelling of every hub with the
+   calibrated rigs, else the simulators' true ones, C3D export), then the figures are
    scored against the truth (:mod:`spotlab.hil.scoring`) and the criteria checked;
 5. ``summary.json``, ``junit.xml`` (or ``--junit``) and ``report.html`` are written.
 
