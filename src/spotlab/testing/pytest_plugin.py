@@ -104,10 +104,15 @@ class ScenarioItem(pytest.Item):
 
     def setup(self) -> None:
         if self.config.pluginmanager.hasplugin("timeout"):
+            import tomllib
+
             from spotlab.hil.catalog import describe
 
             _, duration, _ = describe(self.path)
-            self.add_marker(pytest.mark.timeout(duration * 3 + 240))
+            # The lab's preparation (calibration, model) records and calibrates for minutes.
+            steps = tomllib.loads(self.path.read_text()).get("processing", {}).get("steps", [])
+            extra = 600 if {"calibration", "model"} & set(steps) else 0
+            self.add_marker(pytest.mark.timeout(duration * 3 + 240 + extra))
 
     def runtest(self) -> None:
         from spotlab.hil.runner import run_scenario
