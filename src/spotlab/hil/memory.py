@@ -95,10 +95,12 @@ def memory_figures(
 
     ``record_rss_start_mb`` is the first sample after the warm-up (:data:`WARMUP_FRACTION`
     of ``duration_s``, at least :data:`WARMUP_MIN_S`), ``record_rss_end_mb`` the last
-    sample of the live process, ``record_rss_growth_mb`` the end less the start, and
-    ``record_rss_peak_mb`` the largest sample. None when there are no such samples.
+    sample within ``duration_s`` of the recorder's start (not its summary of the journal
+    after it), ``record_rss_growth_mb`` the end less the start, and
+    ``record_rss_peak_mb`` the largest sample within it. None when there are no such
+    samples.
     """
-    live = [(t, row[name]) for t, row in samples if row.get(name) is not None]
+    live = [(t, row[name]) for t, row in samples if row.get(name) is not None and t <= duration_s]
     warm = max(WARMUP_MIN_S, WARMUP_FRACTION * duration_s)
     after = [(t, v) for t, v in live if t >= warm]
     out: dict[str, float | None] = dict.fromkeys(

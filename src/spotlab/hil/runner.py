@@ -100,24 +100,42 @@ def _record(
         proc = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
     pids = {"record": proc.pid} | {s.device.name: s.proc.pid for s in sims}
     sampler = MemorySampler(pids, sample_interval(seconds)).start()
+    late = None
     try:
-        code = proc.wait(timeout=seconds + 120)
-    except BaseException:  # Ctrl-C or the time-out: the recorder closes its journal on SIGINT
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        try:
+            code = proc.wait(timeout=record_timeout(seconds))
+        except subprocess.TimeoutExpired:  # still summarising, or stuck: it is told to end
+            late = (f"spotlab record did not end within {record_timeout(seconds):g} s; "
+                    "stopped with SIGINT")  # fmt: skip
+            code = _interrupt(proc)
+    except BaseException:  # Ctrl-C: the recorder closes its journal on SIGINT
+        _interrupt(proc)
         raise
     finally:
         sampler.stop()
         sampler.write_csv(folder / "memory.csv")
     errors = [ln for ln in err.read_text(errors="replace").splitlines()
               if ln.startswith("spotlab: error:")]  # fmt: skip
-    return {"record_exit_code": code, "record_error": errors[0] if errors else None,
+    return {"record_exit_code": code, "record_error": late or (errors[0] if errors else None),
             **memory_figures(sampler.samples, seconds)}  # fmt: skip
+
+
+def record_timeout(seconds: float) -> float:
+    """Seconds ``spotlab record --seconds S`` is given to end: S, its devices' start and
+    stop, and its summary of the journal (minutes for an hour's recording)."""
+    return seconds * 1.1 + 120.0
+
+
+def _interrupt(proc: subprocess.Popen[bytes]) -> int:
+    """SIGINT (the recorder closes its journal), then SIGKILL after 15 s; the exit code."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return int(proc.returncode)
 
 
 def _process(
