@@ -111,6 +111,36 @@ def test_ctrl_c_stops_every_simulator_and_keeps_a_partial_report(tmp_path: Path)
     assert (report / "junit.xml").is_file() and (report / "report.html").is_file()
 
 
+@pytest.mark.long
+def test_ctrl_c_while_calibrating_stops_its_simulator_and_recorder(tmp_path: Path) -> None:
+    """The lab's preparation runs commands of its own: Ctrl-C stops them too."""
+    report = tmp_path / "report"
+    path = _scenario(tmp_path, 3.0)
+    text = path.read_text().replace('"reconstruction", "export"', '"calibration", "reconstruction"')
+    path.write_text(text)
+    out, err = tmp_path / "hil.stdout", tmp_path / "hil.stderr"
+    proc = spawn_cli(["hil", "run", path, "--report", report], out, err)
+    try:
+        deadline = time.monotonic() + 60
+        while b"calibrating" not in err.read_bytes() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(3.0)  # the wand's simulator and recorder are running
+        children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True)
+        pids = [int(p) for p in children.stdout.split()]
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=60)
+    finally:
+        stop_process(proc)
+    assert code == 130, err.read_text()
+    assert pids, "no simulator or recorder was running"
+    for pid in pids:
+        status = Path(f"/proc/{pid}/status")
+        assert not status.exists() or "zombie" in status.read_text().lower(), pid
+    summary = json.loads((report / "summary.json").read_text())
+    assert summary["verdict"] == "fail" and "interrupted" in summary["problem"]
+    assert (report / "prepare" / "selspot0.wand.sim.stdout").is_file()
+
+
 def _one_error_in_process(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
     """``spotlab ARGV`` in this process: non-zero, one ``spotlab: error:`` line, returned."""
     code = main(argv)
@@ -143,6 +173,19 @@ def test_a_busy_port_and_an_unknown_key_are_one_line_naming_file_line_and_key(
     assert f"{path}:15: device[0].lenses: unknown key" in line, line
     assert not (tmp_path / "r1").exists()  # refused before any output
     assert "hil-one" not in os.listdir(Path.cwd())
+
+
+def test_a_device_that_cannot_start_is_one_line_naming_file_line_and_device(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "nostart.toml"
+    path.write_text(
+        'duration = 3\n\n[[device]]\nfamily = "selspot"\nname = "a"\n'
+        '[device.sim]\nfaults = "explode@1"\n'
+    )
+    line = _one_error_in_process(["hil", "run", str(path), "--report", str(tmp_path / "r")], capsys)
+    assert f"{path}:3: device[0]: the selspot simulator did not start: --faults" in line, line
+    assert "unknown kind 'explode'" in line, line
 
 
 def test_pytest_hil_collects_scenarios_by_name_and_folder_and_nothing_else(

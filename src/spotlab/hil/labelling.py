@@ -48,10 +48,10 @@ def truth_of_frames(
 
 
 def score_labelling(
-    journal: Path, rig: Path, truth: Path, c3d: Path | None = None
+    journal: Path, rig: Path, truth: Path, c3d: Path | None = None, model: Path | None = None
 ) -> dict[str, Any]:
-    """Identify the markers of a centroid recording (the model it was recorded with), and
-    score the labels against the truth.
+    """Identify the markers of a centroid recording (``model``, by default the one it was
+    recorded with), and score the labels against the truth.
 
     Returns
     -------
@@ -61,7 +61,7 @@ def score_labelling(
         own marker), ``label_error_rms_mm`` (RMS error of the others), ``labels_match``
         (the trial's labels are the truth's, in order).
     """
-    result = reconstruct_file(journal, rig)
+    result = reconstruct_file(journal, rig, model=model)
     if c3d is not None:
         write_trial(c3d, result.trial)
     trial = result.trial

@@ -1,12 +1,18 @@
-"""Run a scenario: simulators as processes, ``spotlab record``, processing, scoring, report.
+"""Run a scenario: preparation, simulators as processes, ``spotlab record``, processing,
+scoring, report.
 
+0. the lab's preparation, when the scenario asks for it: each system calibrated from
+   its own wand dance and L-frame, the hub's marker model learnt from a static trial
+   and a range of motion (:mod:`spotlab.hil.preparation`);
 1. every simulator starts as its own ``spotlab sim`` process on a real pty or TCP
    port (:mod:`spotlab.hil.processes`);
 2. a lab file naming their addresses, settings and the timer's wiring is written and
-   recorded by ``spotlab record --lab`` in its own process, as in a lab;
+   recorded by ``spotlab record --lab`` in its own process, as in a lab, while the
+   memory of it and of the simulators is sampled (:mod:`spotlab.hil.memory`);
 3. the simulators are stopped (they write their truth and fault logs);
 4. the processing steps run through :mod:`spotlab.processing` (session times,
-   reconstruction with the simulator's true rig, C3D export), then the figures are
+   reconstruction of every SELSPOT system and labelling of every hub with the
+   calibrated rigs, else the simulators' true ones, C3D export), then the figures are
    scored against the truth (:mod:`spotlab.hil.scoring`) and the criteria checked;
 5. ``summary.json``, ``junit.xml`` (or ``--junit``) and ``report.html`` are written.
 
@@ -26,6 +32,8 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.hil.labelling import score_labelling
+from spotlab.hil.memory import MemorySampler, memory_figures, sample_interval
+from spotlab.hil.preparation import PreparationError, Prepared, prepare
 from spotlab.hil.processes import (
     CLI,
     RunningSim,
@@ -36,6 +44,7 @@ from spotlab.hil.processes import (
 from spotlab.hil.report import write_html, write_junit, write_summary
 from spotlab.hil.scenario import Scenario
 from spotlab.hil.scoring import device_figures, frame_latency, score_reconstruction, sync_error
+from spotlab.hil.streams import one_stream
 
 
 def _toml_value(value: Any) -> str:
@@ -43,14 +52,19 @@ def _toml_value(value: Any) -> str:
         value, bool) else str(value)  # fmt: skip
 
 
-def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
-    """The lab file of the running simulators (docs/lab.md)."""
+def write_lab(
+    scenario: Scenario, sims: list[RunningSim], path: Path, learnt: Path | None = None
+) -> Path:
+    """The lab file of the running simulators (docs/lab.md); its marker model is the
+    scenario's, else ``learnt`` (the ``model`` step's), else, for the ``labelling`` step,
+    the hub simulator's own."""
     lines = []
     if scenario.rig is not None:
         lines.append(f"rig = {json.dumps(str(scenario.rig))}")
-    model = scenario.model
-    if model is None and "labelling" in scenario.steps:  # the hub simulator's own model
-        model = sims[0].truth.parent / f"{sims[0].device.name}.model.json"
+    model = scenario.model or learnt
+    hubs = [s for s in sims if s.device.family == "centroid"]
+    if model is None and "labelling" in scenario.steps and hubs:
+        model = hubs[0].truth.parent / f"{hubs[0].device.name}.model.json"
     if model is not None:
         lines.append(f"model = {json.dumps(str(model))}")
     for sim in sims:
@@ -64,8 +78,11 @@ def write_lab(scenario: Scenario, sims: list[RunningSim], path: Path) -> Path:
     return path
 
 
-def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str, Any]:
-    """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process."""
+def _record(
+    lab: Path, journal: Path, seconds: float, folder: Path, sims: list[RunningSim]
+) -> dict[str, Any]:
+    """``spotlab record --lab LAB --seconds S --out JOURNAL --json`` in its own process,
+    the memory of it and of the simulators sampled meanwhile (``DIR/memory.csv``)."""
     out, err = folder / "record.stdout", folder / "record.stderr"
     argv = [
         *CLI,
@@ -81,26 +98,56 @@ def _record(lab: Path, journal: Path, seconds: float, folder: Path) -> dict[str,
     ]  # fmt: skip  (the run's own folder)
     with open(out, "wb") as fo, open(err, "wb") as fe:
         proc = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
+    pids = {"record": proc.pid} | {s.device.name: s.proc.pid for s in sims}
+    sampler = MemorySampler(pids, sample_interval(seconds)).start()
+    late = None
     try:
-        code = proc.wait(timeout=seconds + 120)
-    except BaseException:  # Ctrl-C or the time-out: the recorder closes its journal on SIGINT
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        try:
+            code = proc.wait(timeout=record_timeout(seconds))
+        except subprocess.TimeoutExpired:  # still summarising, or stuck: it is told to end
+            late = (f"spotlab record did not end within {record_timeout(seconds):g} s; "
+                    "stopped with SIGINT")  # fmt: skip
+            code = _interrupt(proc)
+    except BaseException:  # Ctrl-C: the recorder closes its journal on SIGINT
+        _interrupt(proc)
         raise
+    finally:
+        sampler.stop()
+        sampler.write_csv(folder / "memory.csv")
     errors = [ln for ln in err.read_text(errors="replace").splitlines()
               if ln.startswith("spotlab: error:")]  # fmt: skip
-    return {"record_exit_code": code, "record_error": errors[0] if errors else None}
+    return {"record_exit_code": code, "record_error": late or (errors[0] if errors else None),
+            **memory_figures(sampler.samples, seconds)}  # fmt: skip
+
+
+def record_timeout(seconds: float) -> float:
+    """Seconds ``spotlab record --seconds S`` is given to end: S, its devices' start and
+    stop, and its summary of the journal (minutes for an hour's recording)."""
+    return seconds * 1.1 + 120.0
+
+
+def _interrupt(proc: subprocess.Popen[bytes]) -> int:
+    """SIGINT (the recorder closes its journal), then SIGKILL after 15 s; the exit code."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return int(proc.returncode)
 
 
 def _process(
-    scenario: Scenario, sims: list[RunningSim], journal: Path, folder: Path
-) -> dict[str, Any]:
+    scenario: Scenario,
+    sims: list[RunningSim],
+    journal: Path,
+    folder: Path,
+    prepared: Prepared,
+) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The processing steps and their scores: the run's figures, and each device's."""
     run: dict[str, Any] = {}
+    per: dict[str, dict[str, Any]] = {}
     if "timestamps" in scenario.steps:
         truths = {s.device.name: (s.device.family, s.truth) for s in sims
                   if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
@@ -109,24 +156,49 @@ def _process(
         run["sync_error_timed_us"] = found["sync_error_timed_us"]
         run["sync_error_per_stream_us"] = found["per_stream_us"]
         run["timebase_notes"] = found["notes"]
-    if "reconstruction" in scenario.steps:
-        (sim,) = sims
-        assert sim.rig is not None
-        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
-        found = score_reconstruction(journal, sim.rig, sim.truth, c3d)
-        run["error_3d_rms_mm"] = found["error_rms_mm"]
-        run["error_3d_max_mm"] = found["error_max_mm"]
-        run["markers_reconstructed"] = found["markers_reconstructed"]
+    alone = len(sims) == 1
+    for sim in sims:
+        name, family = sim.device.name, sim.device.family
+        recon = family == "selspot" and "reconstruction" in scenario.steps
+        label = family == "centroid" and "labelling" in scenario.steps
+        if not (recon or label):
+            continue
+        rig = prepared.rigs.get(name, sim.rig)
+        assert rig is not None
+        stream = journal if alone else one_stream(journal, name, folder / f"{name}.spj")
+        stem = scenario.path.stem if alone else f"{scenario.path.stem}.{name}"
+        c3d = folder / f"{stem}.c3d" if "export" in scenario.steps else None
+        figures: dict[str, Any]
+        if recon:
+            found = score_reconstruction(stream, rig, sim.truth, c3d)
+            figures = {"error_3d_rms_mm": found["error_rms_mm"],
+                       "error_3d_max_mm": found["error_max_mm"],
+                       "markers_reconstructed": found["markers_reconstructed"]}  # fmt: skip
+            if name in prepared.rigs and sim.rig is not None:  # scoring: the floor of the error
+                figures.update(_against_true_rig(stream, sim.rig, sim.truth, figures))
+        else:
+            model = prepared.models.get(name)
+            if model is None and not alone:  # the hub simulator's own model (lab.toml's)
+                model = sim.truth.parent / f"{name}.model.json"
+            figures = score_labelling(stream, rig, sim.truth, c3d, model)
+        figures["rig"] = "calibrated" if name in prepared.rigs else "true"
         if c3d is not None:
-            run["c3d"] = str(c3d)
-    if "labelling" in scenario.steps:
-        (sim,) = sims
-        assert sim.rig is not None
-        c3d = folder / f"{scenario.path.stem}.c3d" if "export" in scenario.steps else None
-        run.update(score_labelling(journal, sim.rig, sim.truth, c3d))
-        if c3d is not None:
-            run["c3d"] = str(c3d)
-    return run
+            figures["c3d"] = str(c3d)
+        per[name] = figures
+        if alone:
+            run.update(figures)
+    return run, per
+
+
+def _against_true_rig(
+    journal: Path, true_rig: Path, truth: Path, calibrated: dict[str, Any]
+) -> dict[str, Any]:
+    """The same trial reconstructed with the simulator's true rig (scoring only): its RMS
+    error, and the calibrated rig's RMS error over it (``error_3d_excess``)."""
+    floor = score_reconstruction(journal, true_rig, truth)["error_rms_mm"]
+    mine = calibrated["error_3d_rms_mm"]
+    excess = mine / floor if mine is not None and floor else None
+    return {"error_3d_rms_true_rig_mm": floor, "error_3d_excess": excess}
 
 
 def _criteria(
@@ -167,13 +239,18 @@ def run_scenario(
     }  # fmt: skip
     journal = folder / "run.spj"
     sims: list[RunningSim] = []
+    prepared = Prepared()
     try:
+        prepared = prepare(scenario, seed, folder, progress)
+        for name, figures in prepared.figures.items():
+            summary["devices"].setdefault(name, {}).update(figures)
         progress(f"starting {len(scenario.devices)} simulator(s)")
         sims = start_simulators(scenario, seed, folder)
         summary["run"]["simulator_pids"] = {s.device.name: s.proc.pid for s in sims}
-        lab = write_lab(scenario, sims, folder / "lab.toml")
+        learnt = next(iter(prepared.models.values()), None)
+        lab = write_lab(scenario, sims, folder / "lab.toml", learnt)
         progress(f"recording {scenario.duration_s:g} s")
-        summary["run"].update(_record(lab, journal, scenario.duration_s, folder))
+        summary["run"].update(_record(lab, journal, scenario.duration_s, folder, sims))
         codes = stop_simulators(sims)
         summary["run"]["simulator_exit_codes"] = codes
         if not journal.is_file():  # a journal ended by an error is scored (record_exit_code)
@@ -181,12 +258,19 @@ def run_scenario(
         else:
             progress("processing and scoring against the truth")
             logs = {s.device.name: s.fault_log for s in sims}
-            summary["devices"] = device_figures(journal, logs)
+            for name, figures in device_figures(journal, logs).items():
+                summary["devices"].setdefault(name, {}).update(figures)
             truths = {s.device.name: (s.device.family, s.truth) for s in sims
                       if s.truth.suffix == ".csv" and s.truth.is_file()}  # fmt: skip
-            for name, figures in frame_latency(journal, truths).items():
+            timeline = folder / "latency.csv"
+            for name, figures in frame_latency(journal, truths, timeline).items():
                 summary["devices"].setdefault(name, {}).update(figures)
-            summary["run"].update(_process(scenario, sims, journal, folder))
+            run, per = _process(scenario, sims, journal, folder, prepared)
+            summary["run"].update(run)
+            for name, figures in per.items():
+                summary["devices"].setdefault(name, {}).update(figures)
+    except PreparationError as exc:
+        summary["problem"] = f"preparation failed: {exc}"
     except KeyboardInterrupt:
         summary["problem"] = "interrupted (Ctrl-C): partial report"
         raise

@@ -55,13 +55,26 @@ SIM_KEYS = (
     "motion", "markers", "ghosts", "noise_blobs", "sunlight", "camera_off", "ring_phase",
     "wand_length", "reflectance", "natnet_version", "password", "inputs", "port", "seconds",
 )  # fmt: skip
-STEPS = ("timestamps", "reconstruction", "labelling", "export")
+STEPS = ("calibration", "model", "timestamps", "reconstruction", "labelling", "export")
 MOTIONS = ("wand", "cluster", "gait", "lframe")
+#: Figures of a device that a processing step gives, the family and step each needs.
+DEVICE_STEP_FIGURES = {
+    "error_3d_rms_mm": ("selspot", "reconstruction"),
+    "error_3d_max_mm": ("selspot", "reconstruction"),
+    "labelled_fraction": ("centroid", "labelling"),
+    "wrong_label_fraction": ("centroid", "labelling"),
+    "label_error_rms_mm": ("centroid", "labelling"),
+    "error_3d_rms_true_rig_mm": ("selspot", "calibration"),
+    "error_3d_excess": ("selspot", "calibration"),
+    "calibration_rms": ("selspot or centroid", "calibration"),
+}
 #: Figures of every device (docs/hil.md).
 DEVICE_FIGURES = ("frames", "frames_sent", "frames_missing", "lost_frames", "crc_errors",
                   "resyncs", "duplicates", "gaps", "reconnects", "faults_injected",
                   "rate_hz", "latency_p50_ms", "latency_p99_ms", "latency_max_ms",
-                  "startup_backlog_ms")  # fmt: skip
+                  "startup_backlog_ms", "latency_p50_start_ms", "latency_p50_end_ms",
+                  "latency_p99_start_ms", "latency_p99_end_ms",
+                  "latency_p50_growth_ms", *DEVICE_STEP_FIGURES)  # fmt: skip
 #: Figures of the run, and what each needs.
 RUN_FIGURES = {
     "sync_error_us": "a timer with wired inputs and the 'timestamps' step",
@@ -72,6 +85,10 @@ RUN_FIGURES = {
     "wrong_label_fraction": "a single device, a centroid hub, and the 'labelling' step",
     "label_error_rms_mm": "a single device, a centroid hub, and the 'labelling' step",
     "record_exit_code": "",
+    "record_rss_start_mb": "",
+    "record_rss_end_mb": "",
+    "record_rss_growth_mb": "",
+    "record_rss_peak_mb": "",
 }
 BOUNDS = ("min", "max")
 
@@ -289,6 +306,11 @@ def _criteria(
                 if figure not in DEVICE_FIGURES:
                     raise c.fail([*key, figure], "no such figure of a device (known: "
                                                  f"{', '.join(DEVICE_FIGURES)})")  # fmt: skip
+                if figure in DEVICE_STEP_FIGURES:
+                    family, step = DEVICE_STEP_FIGURES[figure]
+                    if devices[name].family not in family.split(" or ") or step not in steps:
+                        raise c.fail([*key, figure], f"this figure needs a {family} device "
+                                                     f"and the {step!r} step")  # fmt: skip
                 bound(f"{name}.{figure}", limits, [*key, figure])
         elif name in RUN_FIGURES:
             need = _missing_for(name, scenario_devices, steps, wiring)
@@ -376,10 +398,19 @@ def load_scenario(
         raise c.fail(["processing", "steps"], f"expected a list of {', '.join(STEPS)}")
     if "export" in steps and not {"reconstruction", "labelling"} & set(steps):
         raise c.fail(["processing", "steps"], "'export' writes the reconstruction: add it")
-    if "labelling" in steps and not (len(devices) == 1 and devices[0].family == "centroid"):
-        raise c.fail(["processing", "steps"], "'labelling' takes a single centroid device")
-    if "reconstruction" in steps and not (len(devices) == 1 and devices[0].family == "selspot"):
-        raise c.fail(["processing", "steps"], "'reconstruction' takes a single selspot device")
+    families = {d.family for d in devices}
+    for step, need in (
+        ("labelling", {"centroid"}),
+        ("reconstruction", {"selspot"}),
+        ("calibration", {"selspot", "centroid"}),
+        ("model", {"centroid"}),
+    ):
+        if step in steps and not need & families:
+            kinds = " or ".join(sorted(need))
+            raise c.fail(["processing", "steps"],
+                         f"{step!r} takes a single {kinds} device or more: none here")  # fmt: skip
+    if "model" in steps and "calibration" not in steps:
+        raise c.fail(["processing", "steps"], "'model' learns with the rig: add 'calibration'")
     criteria = _criteria(c, data.get("criteria"), devices, tuple(steps), wiring)
     rig = _lab_path(c, "rig", data.get("rig"))
     model = _lab_path(c, "model", data.get("model"))

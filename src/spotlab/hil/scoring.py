@@ -31,6 +31,10 @@ from spotlab.simulators.truth import read_truth_positions
 F64 = npt.NDArray[np.float64]
 #: Seconds at the start of a stream whose frames are not in the latency figures.
 STARTUP_S = 1.0
+#: The share of a stream's span whose latency is its start (and its end) figure.
+DRIFT_WINDOW = 0.1
+#: Windows of the latency timeline (``latency.csv``).
+TIMELINE_WINDOWS = 60
 _COUNTS = ("frames", "lost_frames", "crc_errors", "resyncs", "duplicates", "gaps", "reconnects")
 
 
@@ -69,7 +73,9 @@ def device_figures(
     return out
 
 
-def frame_latency(journal: Path, truths: Mapping[str, tuple[str, Path]]) -> dict[str, Any]:
+def frame_latency(
+    journal: Path, truths: Mapping[str, tuple[str, Path]], timeline: Path | None = None
+) -> dict[str, Any]:
     """Age of every frame when the host read its last byte: its arrival stamp in the
     recording minus the true instant of its first sample (both on the host's monotonic
     clock, which every process shares), p50 / p99 / max in ms per stream.
@@ -79,7 +85,13 @@ def frame_latency(journal: Path, truths: Mapping[str, tuple[str, Path]]) -> dict
     frames of a stream's first :data:`STARTUP_S` are left out: the recorder starts its
     devices one after the other, and the first device's first frames wait in its port
     while the others start (``startup_backlog_ms``: the oldest of them).
+
+    Whether it stays flat: ``latency_p50_start_ms`` / ``latency_p99_start_ms`` over the
+    first tenth of the steady frames' span, ``..._end_ms`` over the last tenth, and
+    ``latency_p50_growth_ms``; with ``timeline``, a CSV of the latency in
+    :data:`TIMELINE_WINDOWS` windows of time per stream.
     """
+    rows: list[list[str]] = []
     seqs: dict[str, list[Any]] = {}
     ticks: dict[str, list[Any]] = {}
     arrivals: dict[str, list[Any]] = {}
@@ -110,8 +122,54 @@ def frame_latency(journal: Path, truths: Mapping[str, tuple[str, Path]]) -> dict
             figures.update(latency_p50_ms=round(float(p50), 3),
                            latency_p99_ms=round(float(p99), 3),
                            latency_max_ms=round(float(steady.max()), 3))  # fmt: skip
+            figures.update(_latency_drift(arrival[ok & ~early], steady))
+            if timeline is not None:
+                rows += _latency_windows(stream, arrival[ok & ~early] - arrival[0], steady)
         out[stream] = figures
+    if timeline is not None:
+        _write_rows(timeline, rows)
     return out
+
+
+def _latency_drift(arrival_s: F64, age_ms: F64) -> dict[str, float]:
+    """Latency at the start and at the end of a stream's steady frames: p50 and p99 of the
+    first and of the last :data:`DRIFT_WINDOW` of their span (at least 1 s), and the p50's
+    growth between them (whether latency stays flat over a long run)."""
+    span = float(arrival_s[-1] - arrival_s[0])
+    window = max(1.0, DRIFT_WINDOW * span)
+    first = age_ms[arrival_s <= arrival_s[0] + window]
+    last = age_ms[arrival_s >= arrival_s[-1] - window]
+    s50, s99 = np.percentile(first, [50.0, 99.0])
+    e50, e99 = np.percentile(last, [50.0, 99.0])
+    return {
+        "latency_p50_start_ms": round(float(s50), 3),
+        "latency_p99_start_ms": round(float(s99), 3),
+        "latency_p50_end_ms": round(float(e50), 3),
+        "latency_p99_end_ms": round(float(e99), 3),
+        "latency_p50_growth_ms": round(float(e50 - s50), 3),
+    }
+
+
+def _latency_windows(stream: str, t_s: F64, age_ms: F64) -> list[list[str]]:
+    """p50 / p99 / max of a stream's latency in :data:`TIMELINE_WINDOWS` windows of time."""
+    edges = np.linspace(float(t_s[0]), float(t_s[-1]), TIMELINE_WINDOWS + 1)
+    which = np.clip(np.searchsorted(edges, t_s, side="right") - 1, 0, TIMELINE_WINDOWS - 1)
+    rows = []
+    for k in range(TIMELINE_WINDOWS):
+        ages = age_ms[which == k]
+        if ages.size:
+            p50, p99 = np.percentile(ages, [50.0, 99.0])
+            rows.append([stream, f"{edges[k]:.1f}", str(ages.size), f"{p50:.3f}", f"{p99:.3f}",
+                         f"{ages.max():.3f}"])  # fmt: skip
+    return rows
+
+
+def _write_rows(path: Path, rows: list[list[str]]) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        out = csv.writer(fh)
+        out.writerow(["stream", "from_s", "frames", "latency_p50_ms", "latency_p99_ms",
+                      "latency_max_ms"])  # fmt: skip
+        out.writerows(rows)
 
 
 def _true_times(truth: Path, family: str, seq: Sequence[int], ticks: Sequence[int]) -> F64:

@@ -92,7 +92,24 @@ class ScenarioFile(pytest.File):
     """A scenario file: one test."""
 
     def collect(self) -> Iterator[pytest.Item]:
-        yield ScenarioItem.from_parent(self, name=self.path.stem)
+        item = ScenarioItem.from_parent(self, name=self.path.stem)
+        if self.config.pluginmanager.hasplugin("timeout"):
+            # At collection: pytest-timeout reads the marker before the item's own setup.
+            item.add_marker(pytest.mark.timeout(_time_limit(self.path)))
+        yield item
+
+
+def _time_limit(path: Path) -> float:
+    """Seconds a scenario may take: 3 times its duration and 4 minutes, and 10 minutes
+    more for the lab's preparation (calibration, model: recordings and calibrations)."""
+    import tomllib
+
+    from spotlab.hil.catalog import describe
+
+    _, duration, _ = describe(path)
+    steps = tomllib.loads(path.read_text()).get("processing", {}).get("steps", [])
+    extra = 600 if {"calibration", "model"} & set(steps) else 0
+    return float(duration * 3 + 240 + extra)
 
 
 class ScenarioFailed(Exception):
@@ -101,13 +118,6 @@ class ScenarioFailed(Exception):
 
 class ScenarioItem(pytest.Item):
     """Runs :func:`spotlab.hil.runner.run_scenario` on its file."""
-
-    def setup(self) -> None:
-        if self.config.pluginmanager.hasplugin("timeout"):
-            from spotlab.hil.catalog import describe
-
-            _, duration, _ = describe(self.path)
-            self.add_marker(pytest.mark.timeout(duration * 3 + 240))
 
     def runtest(self) -> None:
         from spotlab.hil.runner import run_scenario

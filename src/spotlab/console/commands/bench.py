@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from spotlab.console.device_arguments import add_device_arguments, add_setting_arguments
 from spotlab.console.device_settings import (
     GLOBAL_OPTIONS,
     DeviceRequest,
@@ -14,7 +15,7 @@ from spotlab.console.device_settings import (
     requests_from_options,
 )
 from spotlab.console.errors import EXIT_FAILURE, CommandError
-from spotlab.drivers import Driver, available_families, load_driver
+from spotlab.drivers import Driver, load_driver
 
 HELP = "run a device's conformance suite and measure its timing, with a report"
 
@@ -32,15 +33,7 @@ def add_parser(sub: Any) -> None:
         "PORT: a device path, a pyserial URL (sim://selspot?...), a pty of spotlab sim, or "
         "HOST[:PORT] for qualisys and natnet.",
     )
-    p.add_argument("port", nargs="?", help="device path or URL (with --driver)")
-    p.add_argument("--driver", help=f"device family of PORT ({', '.join(available_families())})")
-    p.add_argument(
-        "--device",
-        action="append",
-        default=[],
-        metavar="FAMILY=PORT[,key=value...]",
-        help="a device to bench, with its settings as for spotlab record; repeat",
-    )
+    add_device_arguments(p, "a device to bench, with its settings as for spotlab record; repeat")
     p.add_argument("--seconds", type=float, default=5.0, help="seconds measured (default 5)")
     p.add_argument(
         "--disruptive", action="store_true", help="also reset the device and pull its cable"
@@ -52,10 +45,7 @@ def add_parser(sub: Any) -> None:
         help="folder of the report (default bench-report)",
     )  # fmt: skip
     p.add_argument("-k", dest="select", metavar="EXPR", help="only the tests pytest -k selects")
-    p.add_argument("--cameras", type=int, help="cameras, for devices that do not say")
-    p.add_argument("--leds", type=int, help="LEDs (markers), for devices that do not say")
-    p.add_argument("--rate", type=float, help="frame rate in Hz, for devices that do not say")
-    p.add_argument("--baud", help="line rate or 'auto', for devices that do not say")
+    add_setting_arguments(p, "line rate or 'auto', for devices that do not say")
     p.set_defaults(run=run)
 
 

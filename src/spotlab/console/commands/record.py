@@ -13,6 +13,7 @@ from typing import Any
 from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session, SessionStatus
 from spotlab.acquisition.summary import summarize
+from spotlab.console.device_arguments import add_device_arguments, add_setting_arguments
 from spotlab.console.device_settings import (
     FAMILY_SETTINGS,
     GLOBAL_OPTIONS,
@@ -26,7 +27,7 @@ from spotlab.console.link_faults import fault_line
 from spotlab.console.options import parse_wiring
 from spotlab.console.progress import Progress
 from spotlab.core.wire import LinkEventKind
-from spotlab.drivers import Driver, available_families, load_driver
+from spotlab.drivers import Driver, load_driver
 from spotlab.io.lab_file import Lab, load_lab
 from spotlab.processing.blob_trajectories import MODEL_KEY, model_metadata
 from spotlab.processing.decoding import decoder_for
@@ -44,14 +45,9 @@ def add_parser(sub: Any) -> None:
         "not given keeps what the device reports it has. Without --seconds the recording "
         "runs until Ctrl-C or SIGTERM.",
     )
-    p.add_argument("port", nargs="?", help="device path or URL (with --driver)")
-    p.add_argument("--driver", help=f"device family of PORT ({', '.join(available_families())})")
-    p.add_argument(
-        "--device",
-        action="append",
-        default=[],
-        metavar="FAMILY=PORT[,key=value...]",
-        help="a device to record, with its own settings (selspot: rate, cameras, leds, slot, "
+    add_device_arguments(
+        p,
+        "a device to record, with its own settings (selspot: rate, cameras, leds, slot, "
         "bgnd, agc, baud; timer: rate, slots, baud; centroid: rate, cameras, exposure, "
         "threshold, blobs, baud; qualisys: password, udp; any: name); repeat for several devices",
     )
@@ -66,12 +62,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--out", type=Path, required=True, help="journal file to write (.spj)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
-    p.add_argument("--cameras", type=int, help="cameras, for devices that do not say")
-    p.add_argument("--leds", type=int, help="LEDs (markers), for devices that do not say")
-    p.add_argument("--rate", type=float, help="frame rate in Hz, for devices that do not say")
-    p.add_argument(
-        "--baud", help="line rate after negotiation, or 'auto', for devices that do not say"
-    )
+    add_setting_arguments(p, "line rate after negotiation, or 'auto', for devices that do not say")
     p.add_argument(
         "--wiring",
         action="append",
