@@ -24,7 +24,8 @@ the console, or the acquisition alone). A last line (``summary``) gives the medi
 over the rounds and the targets: no frame lost, the latency with the console within
 10 % of the figure without, >= 30 updates a second. ``hub_in_real_time`` false means
 the hub's simulator fell behind 300 Hz (a loaded machine starves it: it needs about a
-third of a core at 300 Hz), so the run is not conclusive.
+third of a core at 300 Hz), so the run is not conclusive; the simulators' serving
+threads ask for nice -10 (``SPOTLAB_SIM_NICE``, unless set) to keep them in time.
 
 Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2]``. A shared 2-core
 machine is noisy: the rounds alternate the two runs so that both see the same load.
@@ -267,6 +268,10 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=10.0, help="trial length, s")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of the two runs")
     args = parser.parse_args()
+    # The simulators stand in for devices with processors of their own: their serving
+    # threads at nice -10 where the system allows (simulators/priority.py), so that the
+    # figures are the host's, not a starved simulator's.
+    os.environ.setdefault("SPOTLAB_SIM_NICE", "-10")
     from playwright.sync_api import sync_playwright
 
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as pw:
