@@ -20,13 +20,12 @@ from __future__ import annotations
 
 import json
 import subprocess
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from spotlab.hil.processes import CLI
+from spotlab.hil.processes import CLI, first_line
 from spotlab.hil.scenario import Scenario, SimDevice
 
 #: Seconds of each preparation recording.
@@ -86,7 +85,7 @@ def _recorded(
     with open(sim_out, "wb") as fo, open(sim_err, "wb") as fe:
         sim = subprocess.Popen([*CLI, *sim_args], stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
     try:
-        port = _address(sim_out, sim)
+        port = first_line(sim_out, sim, 30.0)
         if port is None:
             lines = sim_err.read_text(errors="replace").splitlines()
             raise PreparationError(f"{device.name}: the {out.stem} simulator did not start: "
@@ -107,18 +106,6 @@ def _recorded(
             sim.kill()
             sim.wait()
     return out
-
-
-def _address(out: Path, proc: subprocess.Popen[bytes], timeout: float = 30.0) -> str | None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        text = out.read_bytes()
-        if b"\n" in text:
-            return text.split(b"\n", 1)[0].decode().strip()
-        if proc.poll() is not None:
-            return None
-        time.sleep(0.02)
-    return None
 
 
 def calibrate_device(device: SimDevice, seed: int, folder: Path) -> tuple[Path, dict[str, Any]]:

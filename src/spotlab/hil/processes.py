@@ -95,7 +95,9 @@ def _port_free(port: int) -> bool:
     return True
 
 
-def _first_line(out: Path, proc: subprocess.Popen[bytes], timeout: float) -> str | None:
+def first_line(out: Path, proc: subprocess.Popen[bytes], timeout: float) -> str | None:
+    """The first line a child writes to ``out`` (its address), or None if it exits or
+    ``timeout`` s pass first."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         text = out.read_bytes()
@@ -182,7 +184,7 @@ def start_simulators(scenario: Scenario, seed: int, folder: Path) -> list[Runnin
                 )
             )  # fmt: skip
         for sim in sims:
-            address = _first_line(folder / f"{sim.device.name}.sim.stdout", sim.proc,
+            address = first_line(folder / f"{sim.device.name}.sim.stdout", sim.proc,
                                   START_TIMEOUT_S)  # fmt: skip
             if not address:
                 lines = [ln for ln in sim.stderr.read_text(errors="replace").splitlines() if ln]
