@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from spotlab.acquisition.live import LatencyStats, LiveFrame, LivePipeline, PointRecorder
+from spotlab.acquisition.realtime import raise_thread
 from spotlab.acquisition.session import Session
 from spotlab.geometry import Rig
 from spotlab.simulators.rigs import ring_rig
@@ -163,18 +164,18 @@ def _run(
     pipeline = LivePipeline(rig, consumers, inline=not config.startswith("dispatcher"))
     cost = CostMeter(pipeline)
     gc.collect()
-    session = Session(devices, [pipeline])
+    session = Session(devices, [pipeline], realtime_priority=rt_priority or None)
     gcm = GcMeter()
     loads = [os.getloadavg()[0]]
     try:
         if rt_priority:
-            # Threads inherit the policy when created: the session's readers and
-            # dispatchers get it, the source process does not (reset on fork). The main
-            # thread keeps it too: a normal thread holding the interpreter lock while
-            # other programs preempt it would stall the readers (priority inversion).
-            os.sched_setscheduler(
-                0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(rt_priority)
-            )
+            # The session's option raises its readers and dispatchers; the main thread
+            # is raised too (as spotlab console --realtime does): a normal thread
+            # holding the interpreter lock while other programs preempt it would stall
+            # the readers (priority inversion).
+            why = raise_thread(rt_priority)
+            if why is not None:
+                raise SystemExit(f"live_latency: --rt-priority: {why}")
         session.start()
         # Latency of the warm-up frames is not counted: reset once they are through.
         time.sleep(warmup_s)

@@ -30,6 +30,7 @@ from typing import Any
 
 from spotlab.acquisition._channel import SinkChannel, SinkStats
 from spotlab.acquisition.interfaces import Device, InlineSink, Sink, SinkBase
+from spotlab.acquisition.realtime import check_priority, probe, runs_raised
 from spotlab.core.errors import (
     ConfigurationError,
     DeviceDisconnected,
@@ -156,11 +157,19 @@ class Session:
     close_devices : bool, optional
         Also ``close()`` the devices when the session stops (default False:
         whoever created them closes them).
+    realtime_priority : int, optional
+        Run every reader and dispatcher thread under ``SCHED_FIFO`` at this priority
+        (1-99) where the system allows it (root, ``CAP_SYS_NICE`` or ``rtprio``), so
+        that other programs on the machine do not delay them
+        (:mod:`spotlab.acquisition.realtime`, docs/live.md). A refusal leaves the
+        threads at the normal policy; :attr:`realtime_refused` says why. Default None:
+        the normal policy.
 
     Raises
     ------
     ConfigurationError
-        If there is no device, two devices share a name, or ``queue_size`` < 1.
+        If there is no device, two devices share a name, ``queue_size`` < 1 or
+        ``realtime_priority`` is outside 1-99.
 
     Examples
     --------
@@ -177,6 +186,7 @@ class Session:
         recv_timeout_s: float = 0.1,
         is_fatal: Callable[[BaseException], bool] = default_is_fatal,
         close_devices: bool = False,
+        realtime_priority: int | None = None,
     ) -> None:
         self.devices = list(devices)
         self.sinks = list(sinks)
@@ -193,6 +203,10 @@ class Session:
         self._recv_timeout = recv_timeout_s
         self._is_fatal = is_fatal
         self._close_devices = close_devices
+        self._realtime = check_priority(realtime_priority)
+        #: Why a thread could not have ``realtime_priority`` (None: every thread has it,
+        #: or none was asked for).
+        self.realtime_refused: str | None = None
         self._channels = [SinkChannel(n, queue_size) for n in _sink_names(self.sinks)]
         # Inline sinks: called by the readers, one lock each for their counters.
         self._inline = [
@@ -231,6 +245,11 @@ class Session:
             if self._state != "new":
                 raise ConfigurationError(f"a session runs once; this one is {self._state}")
             self._state = "starting"
+        if self._realtime is not None:
+            self.realtime_refused = probe(self._realtime)
+            if self.realtime_refused is not None:
+                log.warning("%s", self.realtime_refused)
+                self._realtime = None  # the threads stay at the normal policy
         try:
             for sink in self.sinks:
                 if _is_tap(sink):
@@ -380,10 +399,18 @@ class Session:
         role: str,
     ) -> None:
         thread = threading.Thread(
-            target=target, args=args, name=f"spotlab-{role}-{name}", daemon=True
+            target=runs_raised(target, self._realtime, self._refused),
+            args=args,
+            name=f"spotlab-{role}-{name}",
+            daemon=True,
         )
         into.append(thread)
         thread.start()
+
+    def _refused(self, why: str) -> None:
+        if self.realtime_refused is None:
+            self.realtime_refused = why
+            log.warning("%s", why)
 
     def _read(self, device: Device) -> None:
         name = device.name
