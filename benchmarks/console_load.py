@@ -20,15 +20,21 @@ update rate measured in the browser (new marker frames the page drew per second,
 ``window.spotlab.frames3d``, over the middle of the trial) and the live messages it
 received per second; the machine's load average, the share of a core each simulator
 process used over the run and the acquiring process over the trial (``host_cpu_share``:
-the console, or the acquisition alone). A last line (``summary``) gives the medians
+the console, or the acquisition alone), and with the page, the share of a core all of
+Chromium's processes used over the trial (``browser_cpu_share``: it draws the 3-D view
+with a software renderer on this machine, beside the acquisition). A last line
+(``summary``) gives the medians
 over the rounds and the targets: no frame lost, the latency with the console within
 10 % of the figure without, >= 30 updates a second. ``hub_in_real_time`` false means
 the hub's simulator fell behind 300 Hz (a loaded machine starves it: it needs about a
 third of a core at 300 Hz), so the run is not conclusive; the simulators' serving
 threads ask for nice -10 (``SPOTLAB_SIM_NICE``, unless set) to keep them in time.
 
-Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2]``. A shared 2-core
-machine is noisy: the rounds alternate the two runs so that both see the same load.
+``--realtime PRIO`` runs both the same way as ``spotlab console --realtime PRIO``: every
+thread of the acquiring process under ``SCHED_FIFO`` (needs root or CAP_SYS_NICE).
+
+Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2] [--realtime 10]``.
+A shared 2-core machine is noisy: the rounds alternate the two runs so that both see the same load.
 """
 
 from __future__ import annotations
@@ -90,6 +96,21 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def _browser_cpu_s() -> float:
+    """CPU time all Chromium processes on the machine used so far, s."""
+    total = 0.0
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if "chromium" not in (entry / "cmdline").read_bytes().split(b"\0", 1)[0].decode():
+                continue
+            total += _cpu_s(int(entry.name))
+        except (OSError, ValueError, IndexError):  # gone meanwhile
+            continue
+    return total
+
+
 class Load:
     """The machine's load and the simulators' CPU share over one run."""
 
@@ -143,13 +164,17 @@ def _trial(info: dict[str, Any], data: Path) -> dict[str, Any]:
 
 
 # ---- without the console: the acquisition alone, in a child process ---------------------
-def _headless(lab: Path, data: Path, seconds: float) -> int:
+def _headless(lab: Path, data: Path, seconds: float, realtime: int | None) -> int:
     """Record one trial with the console's acquisition and no web side; print JSON."""
     from spotlab.console.web.acquisition import Acquisition
     from spotlab.console.web.lab_setup import plan_lab
     from spotlab.console.web.trials import TrialInfo, TrialStore
 
-    acq = Acquisition(plan_lab(lab, False, data), TrialStore(data))
+    if realtime is not None:  # as spotlab console --realtime: the whole process
+        from spotlab.acquisition.realtime import raise_thread
+
+        raise_thread(realtime)
+    acq = Acquisition(plan_lab(lab, False, data), TrialStore(data), realtime_priority=realtime)
     acq.start()
     try:
         deadline = time.monotonic() + 60
@@ -171,11 +196,12 @@ def _headless(lab: Path, data: Path, seconds: float) -> int:
 
 
 def _run_without(
-    lab: Path, folder: Path, seconds: float, n: int, sims: dict[str, int]
+    lab: Path, folder: Path, seconds: float, n: int, sims: dict[str, int], realtime: int | None
 ) -> dict[str, Any]:
     data = folder / f"data-without-{n}"
     load = Load(sims)
-    args = [sys.executable, __file__, "--headless", str(lab), str(data), str(seconds)]
+    args = [sys.executable, __file__, "--headless", str(lab), str(data), str(seconds),
+            "-" if realtime is None else str(realtime)]  # fmt: skip
     done = subprocess.run(args, capture_output=True, text=True, timeout=seconds + 180)
     if done.returncode != 0:
         raise RuntimeError(f"the acquisition alone failed: {done.stderr[-2000:]}")
@@ -187,12 +213,19 @@ def _run_without(
 
 # ---- with the console and its page in Chromium -------------------------------------------
 def _run_with(
-    lab: Path, folder: Path, seconds: float, n: int, browser: Any, sims: dict[str, int]
+    lab: Path,
+    folder: Path,
+    seconds: float,
+    n: int,
+    browser: Any,
+    sims: dict[str, int],
+    realtime: int | None,
 ) -> dict[str, Any]:
     data = folder / f"data-with-{n}"
     load = Load(sims)
     proc, url = _spawn(
-        [*CLI, "console", "--lab", str(lab), "--port", "0", "--no-browser", "--data", str(data)],
+        [*CLI, "console", "--lab", str(lab), "--port", "0", "--no-browser", "--data", str(data)]
+        + ([] if realtime is None else ["--realtime", str(realtime)]),
         folder,
         f"console-{n}",
     )
@@ -205,7 +238,7 @@ def _run_with(
         )
         _call(base, "/api/trials/start", {"subject": "bench", "session": "load", "trial": "with"})
         page.wait_for_function("window.spotlab.status.mode === 'recording'", timeout=30_000)
-        t0, c0 = time.monotonic(), _cpu_s(proc.pid)
+        t0, c0, w0 = time.monotonic(), _cpu_s(proc.pid), _browser_cpu_s()
         # the page's updates over the middle of the trial (after the session's start-up)
         time.sleep(min(2.0, seconds / 4))
         a = page.evaluate("[performance.now(), window.spotlab.frames3d, window.spotlab.messages]")
@@ -213,7 +246,8 @@ def _run_with(
         b = page.evaluate("[performance.now(), window.spotlab.frames3d, window.spotlab.messages]")
         time.sleep(max(0.0, seconds - (time.monotonic() - t0)))
         latency = _call(base, "/api/status")["live_latency"]
-        share = (_cpu_s(proc.pid) - c0) / (time.monotonic() - t0)
+        wall = time.monotonic() - t0
+        share, browser_share = (_cpu_s(proc.pid) - c0) / wall, (_browser_cpu_s() - w0) / wall
         info = _call(base, "/api/trials/stop", {})
     finally:
         page.close()
@@ -224,7 +258,7 @@ def _run_with(
         **_latency(latency),
         "page_3d_fps": round((b[1] - a[1]) / span_s, 1),
         "page_messages_per_s": round((b[2] - a[2]) / span_s, 1), **load.result(),
-        "host_cpu_share": round(share, 3),
+        "host_cpu_share": round(share, 3), "browser_cpu_share": round(browser_share, 3),
     }  # fmt: skip
 
 
@@ -250,6 +284,7 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out["page_3d_fps"] = fps
     for run in ("without", "with"):
         out[f"{run}_host_cpu_share"] = median(run, "host_cpu_share")
+    out["with_browser_cpu_share"] = median("with", "browser_cpu_share")
     out["loadavg_1min"] = round(statistics.median(r["loadavg_1min"] for r in rows), 2)
     # a hub whose frames span less than 99 % of the trial fell behind: not conclusive
     out["hub_in_real_time"] = min(r["realtime"].get("hub") or 0.0 for r in rows) >= 0.99
@@ -262,11 +297,16 @@ def _summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main() -> int:
-    if len(sys.argv) == 5 and sys.argv[1] == "--headless":
-        return _headless(Path(sys.argv[2]), Path(sys.argv[3]), float(sys.argv[4]))
+    if len(sys.argv) == 6 and sys.argv[1] == "--headless":
+        rt = None if sys.argv[5] == "-" else int(sys.argv[5])
+        return _headless(Path(sys.argv[2]), Path(sys.argv[3]), float(sys.argv[4]), rt)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="trial length, s")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of the two runs")
+    parser.add_argument(
+        "--realtime", type=int, default=None, metavar="PRIO",
+        help="both runs' acquisition threads under SCHED_FIFO at PRIO (--realtime)",
+    )  # fmt: skip
     args = parser.parse_args()
     # The simulators stand in for devices with processors of their own: their serving
     # threads at nice -10 where the system allows (simulators/priority.py), so that the
@@ -305,9 +345,9 @@ def main() -> int:
                 for run in ("without", "with"):
                     pids = {"hub": hub.pid, "selspot": spx.pid}
                     if run == "without":
-                        row = _run_without(lab, folder, args.seconds, n, pids)
+                        row = _run_without(lab, folder, args.seconds, n, pids, args.realtime)
                     else:
-                        row = _run_with(lab, folder, args.seconds, n, browser, pids)
+                        row = _run_with(lab, folder, args.seconds, n, browser, pids, args.realtime)
                     rows.append(row)
                     print(json.dumps(row), flush=True)
             print(json.dumps(_summary(rows)), flush=True)

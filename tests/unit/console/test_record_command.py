@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 import spotlab.simulators  # noqa: F401  (registers sim://)
+from spotlab.acquisition.realtime import probe
 from spotlab.console.cli import main
 from spotlab.io import read_c3d, read_trc
 from spotlab.io.journal import JournalReader
@@ -272,3 +273,27 @@ def test_the_lab_files_rig_reconstructs_its_recordings(
     _record(capsys, "sim://selspot?seed=4", "--driver", "selspot", "--seconds", 0.2, "--out", plain)
     code = main(["reconstruct", str(plain), "--out", str(tmp_path / "p.trc")])
     _one_error(capsys, code, "--calibration", "names no rig")
+
+
+def test_realtime_records_and_reports_its_policy(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "rt.spj"
+    result = _record(
+        capsys, "sim://selspot?seed=3", "--driver", "selspot", "--seconds", 0.3,
+        "--realtime", 5, "--out", out,
+    )  # fmt: skip
+    refused = probe(5)
+    assert result["realtime"] == {"priority": 5, "refused": refused}
+    assert result["streams"][0]["frames"] > 0
+
+
+@pytest.mark.parametrize(("value", "needle"), [("0", "1-99, got 0"), ("x", "got 'x'")])
+def test_a_bad_realtime_priority_is_one_error(
+    value: str, needle: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "r.spj"
+    with pytest.raises(SystemExit) as exc:  # a usage error: argparse's exit code 2
+        main(["record", "sim://selspot", "--realtime", value, "--seconds", "1", "--out", str(out)])
+    _one_error(capsys, int(exc.value.code or 0), "--realtime", needle)
+    assert not out.exists()

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from spotlab.console.errors import CommandError
+from spotlab.console.options import add_realtime_argument
 
 
 def add_parser(sub: Any) -> None:
@@ -40,6 +41,7 @@ def add_parser(sub: Any) -> None:
         metavar="T",
         help="a token the page and API require (needed with a --host other than loopback)",
     )
+    add_realtime_argument(p)
     p.set_defaults(run=run)
 
 
@@ -61,4 +63,5 @@ def run(args: argparse.Namespace) -> int:
         data=args.data,
         token=args.token,
         open_browser=not args.no_browser,
+        realtime=args.realtime,
     )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import signal
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,7 +25,7 @@ from spotlab.console.device_settings import (
 )
 from spotlab.console.errors import CommandError
 from spotlab.console.link_faults import fault_line
-from spotlab.console.options import parse_wiring
+from spotlab.console.options import add_realtime_argument, parse_wiring
 from spotlab.console.progress import Progress
 from spotlab.core.wire import LinkEventKind
 from spotlab.drivers import Driver, load_driver
@@ -78,6 +79,7 @@ def add_parser(sub: Any) -> None:
         help="marker model (names, rigid clusters) of the subject, kept in the recording for "
         "spotlab reconstruct of video-centroid recordings (default: the lab file's)",
     )
+    add_realtime_argument(p)
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(run=run)
 
@@ -234,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
     watch = OutageWatch()
     for driver in drivers:
         driver.add_tap(watch)
-    session = Session(drivers, [recorder], close_devices=True)
+    session = Session(drivers, [recorder], close_devices=True, realtime_priority=args.realtime)
     seconds = float("inf") if args.seconds is None else args.seconds
     try:
         with _stop_on_signals(session) as received:
@@ -261,6 +263,9 @@ def run(args: argparse.Namespace) -> int:
         "errors": [str(e) for e in session.errors],
         "away_at_end": dict(watch.away),
     }
+    result["realtime"] = {"priority": args.realtime, "refused": session.realtime_refused}
+    if session.realtime_refused is not None:
+        print(f"spotlab: warning: --realtime: {session.realtime_refused}", file=sys.stderr)
     if args.json:
         print(json.dumps(result))
     else:

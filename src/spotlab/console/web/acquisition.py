@@ -64,12 +64,21 @@ class Acquisition:
         Where trials go.
     warn : callable
         Takes one line for the operator (default: ``spotlab: warning: ...`` on stderr).
+    realtime_priority : int, optional
+        The sessions' threads under ``SCHED_FIFO`` at this priority where the system
+        allows it (``Session``'s option; a refusal is told once). Default: normal.
     """
 
     def __init__(
-        self, plan: LabPlan, store: TrialStore, warn: Callable[[str], None] = _warn
+        self,
+        plan: LabPlan,
+        store: TrialStore,
+        warn: Callable[[str], None] = _warn,
+        *,
+        realtime_priority: int | None = None,
     ) -> None:
         self.plan = plan
+        self.realtime_priority = realtime_priority
         self.store = store
         self._warn = warn
         self._warned: set[str] = set()
@@ -318,7 +327,9 @@ class Acquisition:
             sinks, note = self._sinks(live)
             if recorder is not None:
                 sinks.insert(0, recorder)
-            session = Session(present, sinks, close_devices=True)
+            session = Session(
+                present, sinks, close_devices=True, realtime_priority=self.realtime_priority
+            )
             try:
                 session.start()
             except Exception as exc:  # told to the operator
@@ -332,6 +343,8 @@ class Acquisition:
                 return None
             self.live_note = note
             self.errors.pop("lab", None)
+            if session.realtime_refused is not None:
+                self._note("realtime", f"--realtime: {session.realtime_refused}")
             return session
         return None
 

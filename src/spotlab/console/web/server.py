@@ -16,6 +16,7 @@ from pathlib import Path
 
 import uvicorn
 
+from spotlab.acquisition.realtime import raise_thread
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.app import make_app
 from spotlab.console.web.lab_setup import plan_lab
@@ -70,13 +71,14 @@ def serve(
     data: Path,
     token: str | None,
     open_browser: bool,
+    realtime: int | None = None,
 ) -> int:
     """Run the console; returns the exit code (0 after SIGINT or SIGTERM)."""
     check_access(host, token)
     sock = bind(host, port)
     try:
         plan = plan_lab(lab, sim, data)
-        acq = Acquisition(plan, TrialStore(data))
+        acq = Acquisition(plan, TrialStore(data), realtime_priority=realtime)
     except BaseException:
         sock.close()
         raise
@@ -84,9 +86,19 @@ def serve(
     shown = f"[{host}]" if ":" in host else host
     url = f"http://{shown}:{bound}/" + (f"?token={token}" if token else "")
     print(url, flush=True)
+    if realtime is not None:
+        # Every thread of the console under SCHED_FIFO, the web server's too: a normal
+        # thread holding the interpreter lock while other programs (the page's browser)
+        # run would hold up the acquisition's. Threads started from here inherit the
+        # policy; a refusal is told by the sessions (Acquisition's note).
+        raise_thread(realtime)
     acq.start()
     app = make_app(acq, token)
-    config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
+    # no per-message deflate: the live messages (a few kB at 40 Hz) to a page on this
+    # machine or the lab's network are not worth compressing in the acquiring process
+    config = uvicorn.Config(
+        app, log_level="warning", access_log=False, lifespan="off", ws_per_message_deflate=False
+    )
     server = _Server(config)
     if open_browser:
         threading.Timer(0.5, webbrowser.open, (url,)).start()
