@@ -35,10 +35,11 @@ lowest and highest during the run and at the end (other programs share the cores
 The first ``--warmup`` seconds are not measured. Options: ``--poll-us`` (the reader
 polls with sleeps instead of waiting in the kernel), ``--gc-freeze``,
 ``--keep-points`` (a PointRecorder consumer too), ``--rt-priority`` (the session's
-threads under SCHED_FIFO).
+threads under SCHED_FIFO: ``Session(realtime_priority=...)``), ``--busy N`` (N other
+processes each keeping a core busy during the run).
 
 Usage: ``python benchmarks/live_latency.py [--seconds 60] [--configs inline ...]
-[--warmup 1] [--rt-priority 10]``
+[--warmup 1] [--rt-priority 10] [--busy 1]``
 """
 
 from __future__ import annotations
@@ -47,6 +48,8 @@ import argparse
 import gc
 import json
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -270,24 +273,40 @@ def main() -> None:
         action="store_true",
         help="a PointRecorder consumer too (keeps every frame: the garbage collector runs)",
     )
+    parser.add_argument(
+        "--busy",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N other processes, each keeping one core busy (a spinning Python loop) for "
+        "the whole run: issue 19's load",
+    )
     args = parser.parse_args()
     poll_s = None if args.poll_us is None else args.poll_us / 1e6
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "rig.toml"
         ring_rig(CAMERAS).save(path)
         rig = Rig.load(path)
-    for config in args.configs:
-        result = _run(
-            config,
-            args.seconds,
-            args.warmup,
-            rig,
-            poll_s,
-            args.gc_freeze,
-            args.keep_points,
-            args.rt_priority,
-        )
-        print(json.dumps(result), flush=True)
+    # started from another session, as a program a user runs beside the acquisition
+    spin = [sys.executable, "-c", "while True: pass"]
+    busy = [subprocess.Popen(spin, start_new_session=True) for _ in range(args.busy)]
+    try:
+        for config in args.configs:
+            result = _run(
+                config,
+                args.seconds,
+                args.warmup,
+                rig,
+                poll_s,
+                args.gc_freeze,
+                args.keep_points,
+                args.rt_priority,
+            )
+            print(json.dumps({**result, "busy_processes": args.busy}), flush=True)
+    finally:
+        for proc in busy:
+            proc.kill()
+            proc.wait()
 
 
 if __name__ == "__main__":
