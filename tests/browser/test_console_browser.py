@@ -122,6 +122,16 @@ def test_devices_views_record_and_export(sim_console: tuple[str, Path], browser:
         "document.querySelectorAll('#health canvas').length === 3", timeout=10_000
     )
     assert "lost" in page.inner_text("#health div[data-device='selspot']")
+    # a device's settings from the page: the family's keys offered, a bad value refused
+    page.select_option("#device-name", "selspot")
+    page.wait_for_function("document.querySelector('#device-setting option[value=leds]')")
+    page.select_option("#device-setting", "leds")
+    page.fill("#device-value", "six")
+    page.click("#device-set")
+    page.wait_for_function(
+        "document.getElementById('device-msg').textContent.includes('leds')", timeout=10_000
+    )
+    assert page.locator("#devices td.ok").count() == 3  # nothing restarted
     _shot(page, "1-devices-and-views")
     # record a 5 s trial from the page
     page.fill("#trial", "walk5s")

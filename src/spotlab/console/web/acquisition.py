@@ -29,7 +29,7 @@ from spotlab.acquisition.recorder import Recorder
 from spotlab.acquisition.session import Session
 from spotlab.acquisition.summary import summarize
 from spotlab.console.device_settings import FAMILY_SETTINGS
-from spotlab.console.web.lab_setup import LabPlan
+from spotlab.console.web.lab_setup import LabPlan, settings_of
 from spotlab.console.web.live_view import MarkerSlot, ViewSink
 from spotlab.console.web.trials import TrialInfo, TrialStore
 from spotlab.drivers import Driver
@@ -194,6 +194,8 @@ class Acquisition:
         session = self.session
         trial = self.trial
         kept = "" if trial is None else f" (trial {trial.id} keeps what arrived)"
+        plan = self.plan
+        given = {n: settings_of(plan, n) for n in plan.names()}
         for driver in list(self.drivers):
             name = driver.name
             stats = driver.stats.as_dict()
@@ -220,6 +222,12 @@ class Acquisition:
                     "resyncs": stats["resyncs"],
                     "reconnects": stats["reconnects"],
                     "rate_settable": "rate" in FAMILY_SETTINGS.get(driver.family, {}),
+                    # the family's settings (key: what it is) and those the device is given
+                    "settings": {
+                        key: what
+                        for key, (_, _, what) in FAMILY_SETTINGS.get(driver.family, {}).items()
+                    },
+                    "set": given.get(name, {}),
                     "clock_offset_s": None if offset is None else round(offset, 6),
                     "clock_drift_ppm": None if drift is None else round(drift, 1),
                     "last_error": self.missing.get(name)

@@ -27,7 +27,7 @@ from spotlab import __version__
 from spotlab.console.web.acquisition import Acquisition
 from spotlab.console.web.calibration_wizard import CalibrationWizard
 from spotlab.console.web.export import export_trial
-from spotlab.console.web.lab_setup import with_rate
+from spotlab.console.web.lab_setup import with_rate, with_settings
 from spotlab.console.web.link_health import LinkHealth
 from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo
@@ -111,10 +111,15 @@ def make_app(
             return _error(404, f"no device {name!r} in the lab")
         try:
             raw = await body(request)
-            acq.restart(with_rate(acq.plan, name, raw.get("rate_hz")))
+            if "settings" in raw:  # any of the family's settings, as in a lab file
+                acq.restart(with_settings(acq.plan, name, raw["settings"]))
+                done = {"settings": raw["settings"]}
+            else:
+                acq.restart(with_rate(acq.plan, name, raw.get("rate_hz")))
+                done = {"rate_hz": float(raw["rate_hz"])}
         except InputError as exc:
             return _error(409 if "being recorded" in str(exc) else 400, str(exc))
-        return JSONResponse({"device": name, "rate_hz": float(raw["rate_hz"]), "restarting": True})
+        return JSONResponse({"device": name, **done, "restarting": True})
 
     async def calibration(request: Request) -> Response:
         if (denied := await guard(request)) is not None:

@@ -22,7 +22,7 @@ from spotlab.drivers import Driver, load_driver
 from spotlab.io.lab_file import Lab, load_lab
 from spotlab.processing.errors import InputError
 
-__all__ = ["LabPlan", "plan_lab", "sim_lab_file", "with_rate"]
+__all__ = ["LabPlan", "plan_lab", "settings_of", "sim_lab_file", "with_rate", "with_settings"]
 
 #: Rate of every simulated device, Hz.
 SIM_RATE_HZ = 100
@@ -74,25 +74,39 @@ class LabPlan:
         return drivers
 
 
-def with_rate(plan: LabPlan, name: str, rate_hz: object) -> LabPlan:
-    """``plan`` with device ``name`` set to ``rate_hz`` (Hz) (the lab file is not changed).
+def with_settings(plan: LabPlan, name: str, settings: object) -> LabPlan:
+    """``plan`` with device ``name``'s settings changed (the lab file is not changed).
+
+    Parameters
+    ----------
+    plan : LabPlan
+    name : str
+        A device of the lab.
+    settings : mapping of str to int, float or str
+        Settings of the device's family (:data:`FAMILY_SETTINGS`, the lab file's keys:
+        ``rate``, ``leds``, ``exposure``, ...), checked as a lab file's are.
 
     Raises
     ------
     InputError
-        For no such device, a family without a rate setting, or a rate that is not a
-        positive number.
+        For no such device, no setting, a key the family does not have, or a value the
+        setting does not take.
     """
     names = plan.names()
     if name not in names:
         raise InputError(f"no device {name!r} in the lab (it has {', '.join(names)})")
+    if not isinstance(settings, dict) or not settings:
+        raise InputError('settings must be an object of at least one "setting": value')
     index = names.index(name)
     device = plan.lab.devices[index]
-    if "rate" not in FAMILY_SETTINGS.get(device.family, {}):
-        raise InputError(f"a {device.family} device's rate is not set by the console")
-    if isinstance(rate_hz, bool) or not isinstance(rate_hz, int | float) or not rate_hz > 0:
-        raise InputError(f"rate_hz must be a positive number, got {rate_hz!r}")
-    changed = dataclasses.replace(device, settings={**device.settings, "rate": float(rate_hz)})
+    known = FAMILY_SETTINGS.get(device.family, {})
+    for key, value in settings.items():
+        if key not in known:
+            has = ", ".join(known) or "none"
+            raise InputError(f"a {device.family} device has no setting {key!r} (it has {has})")
+        if isinstance(value, bool) or not isinstance(value, int | float | str):
+            raise InputError(f"setting {key!r} must be a number or a word, got {value!r}")
+    changed = dataclasses.replace(device, settings={**device.settings, **settings})
     devices = (*plan.lab.devices[:index], changed, *plan.lab.devices[index + 1 :])
     new = LabPlan(dataclasses.replace(plan.lab, devices=devices), plan.simulated)
     try:
@@ -100,6 +114,21 @@ def with_rate(plan: LabPlan, name: str, rate_hz: object) -> LabPlan:
     except CommandError as exc:
         raise InputError(str(exc)) from None
     return new
+
+
+def with_rate(plan: LabPlan, name: str, rate_hz: object) -> LabPlan:
+    """``plan`` with device ``name`` set to ``rate_hz`` (Hz): :func:`with_settings` of
+    ``rate`` (InputError also for a rate that is not a positive number)."""
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, int | float) or not rate_hz > 0:
+        raise InputError(f"rate_hz must be a positive number, got {rate_hz!r}")
+    return with_settings(plan, name, {"rate": float(rate_hz)})
+
+
+def settings_of(plan: LabPlan, name: str) -> dict[str, object]:
+    """The settings device ``name`` is given (the lab file's, with what the console
+    changed); a setting not given keeps what the device has."""
+    index = plan.names().index(name)
+    return dict(plan.lab.devices[index].settings)
 
 
 def sim_lab_file(data: Path) -> Path:

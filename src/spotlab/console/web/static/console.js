@@ -61,6 +61,20 @@ function showDeviceChoices(devices) {
   }
   const d = devices.find((x) => x.name === select.value);
   document.getElementById("device-set-rate").disabled = recording || !(d && d.rate_settable);
+  // the chosen device's family settings, each titled with what it is and what it is given
+  const setting = document.getElementById("device-setting");
+  const keys = d ? Object.keys(d.settings || {}) : [];
+  const shown = keys.map((k) => k + "=" + ((d.set || {})[k] ?? "")).join("\n");
+  if (setting.dataset.shown !== (d ? d.name : "") + "\n" + shown) {
+    const chosen = setting.value;
+    setting.replaceChildren(...keys.map((k) => {
+      const given = (d.set || {})[k];
+      return el("option", { value: k, title: d.settings[k] + (given === undefined ? "" : "; given " + given) }, k);
+    }));
+    if (keys.includes(chosen)) setting.value = chosen;
+    setting.dataset.shown = (d ? d.name : "") + "\n" + shown;
+  }
+  document.getElementById("device-set").disabled = recording || keys.length === 0;
   // a device reconnects alone in the running session, a trial being recorded goes on
   document.getElementById("device-reconnect").disabled = false;
 }
@@ -76,6 +90,13 @@ function deviceAction(what, body) {
 document.getElementById("device-reconnect").addEventListener("click", () => deviceAction("reconnect", {}));
 document.getElementById("device-set-rate").addEventListener("click", () =>
   deviceAction("configure", { rate_hz: Number(document.getElementById("device-rate").value) }));
+document.getElementById("device-set").addEventListener("click", () => {
+  const key = document.getElementById("device-setting").value;
+  const text = document.getElementById("device-value").value.trim();
+  // a number where it reads as one ("200", "1e3"), a word otherwise ("off", "auto")
+  const value = text !== "" && !Number.isNaN(Number(text)) ? Number(text) : text;
+  deviceAction("configure", { settings: { [key]: value } });
+});
 
 function showBanner(status, devices) {
   const lines = [];
