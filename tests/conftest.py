@@ -6,12 +6,36 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator
+from importlib.metadata import version
 from pathlib import Path
 from typing import NoReturn
 
 import pytest
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Under ``--dist loadgroup`` (make test), refuse a pytest on which pytest-xdist's
+    grouping has no effect: the end-to-end modules' session recordings would be made
+    once per worker, at the same time (twice the time, and two LSL outlets of one name).
+    pytest 9.2 no longer reads the field where pytest-xdist 3.8 marks a test's group
+    (pytest-dev/pytest-xdist#1386); pyproject.toml keeps pytest below 9.2."""
+    if config.getoption("dist", default="no") != "loadgroup":
+        return
+    xdist = version("pytest-xdist")
+    if _release(pytest.__version__) >= (9, 2) and _release(xdist) <= (3, 8):
+        raise pytest.UsageError(
+            f"--dist loadgroup does not group tests with pytest {pytest.__version__} and "
+            f"pytest-xdist {xdist} (pytest-xdist#1386): install the pytest pyproject.toml "
+            "asks for (make .venv/.installed-stamp)"
+        )
+
+
+def _release(text: str) -> tuple[int, ...]:
+    """(major, minor) of a version string."""
+    parts = [int("".join(ch for ch in p if ch.isdigit()) or 0) for p in text.split(".")[:2]]
+    return tuple(parts)
 
 
 def _open_fds() -> dict[int, str]:
