@@ -27,6 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from spotlab.geometry import Camera
+from spotlab.simulators.blob_optics import Optics, project_many
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -158,38 +159,6 @@ def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B
     return np.asarray(((dist < radius) & in_front & ~on[None]).any(axis=2))
 
 
-def _project_many(cams: list[Camera], P: F64, model: BlobModel) -> tuple[F64, F64, F64, B]:
-    """Image centroids (n, N, 2), diameters (px), raw peaks and in-view flags (n, N).
-
-    ``P`` (n, N, 3) holds the points each of the ``n`` cameras sees (NaN: none): one
-    projection for all cameras, each with its own lens (the Brown model of
-    :func:`spotlab.geometry.distortion.distort_normalized`, per camera).
-    """
-    R = np.stack([c.R for c in cams])  # (n, 3, 3)
-    t = np.stack([c.t for c in cams])  # (n, 3)
-    K = np.stack([c.K for c in cams])  # (n, 3, 3)
-    k1, k2, p1, p2, k3 = np.stack([c.dist for c in cams]).T[:, :, None]  # (n, 1) each
-    with np.errstate(invalid="ignore", divide="ignore"):
-        xc = np.einsum("nij,nkj->nki", R, P) + t[:, None, :]
-        z = xc[..., 2]
-        good = np.isfinite(z) & (z > 100.0)
-        zz = np.where(good, z, 1.0)
-        x, y = xc[..., 0] / zz, xc[..., 1] / zz
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    u = K[:, 0, 0, None] * xd + K[:, 0, 1, None] * yd + K[:, 0, 2, None]
-    v = K[:, 1, 1, None] * yd + K[:, 1, 2, None]
-    uv = np.where(good[..., None], np.stack([u, v], axis=-1), np.nan)
-    size = np.array([c.size for c in cams], dtype=np.float64)  # (n, 2)
-    diameter = np.where(good, K[:, 0, 0, None] * model.marker_diameter_mm / zz, 0.0)
-    peak = np.where(good, model.peak_at_4m * (4000.0 / zz) ** 2, 0.0)
-    with np.errstate(invalid="ignore"):
-        inside = good & (uv >= 0).all(axis=-1) & (uv <= size[:, None, :] - 1).all(axis=-1)
-    return uv, diameter, peak, np.asarray(inside)
-
-
 def render_camera(
     cam: Camera,
     X: F64,
@@ -248,6 +217,7 @@ def render_cameras(
     hidden: B | None = None,
     ghosts: B | None = None,
     sun_blobs: list[int] | None = None,
+    optics: Optics | None = None,
 ) -> list[CameraBlobs]:
     """The blobs of ``n`` cameras in one frame, rendered together.
 
@@ -267,6 +237,8 @@ def render_cameras(
         Markers whose floor reflection each camera sees.
     sun_blobs : list of int, length n, optional
         Sunlight blobs to add per camera (random, bright).
+    optics : Optics, optional
+        ``cams`` stacked (:meth:`Optics.of`), when the caller keeps them between frames.
 
     Returns
     -------
@@ -279,7 +251,8 @@ def render_cameras(
         P = np.concatenate([X, np.where(ghosts[..., None], mirror, np.nan)], axis=1)
     else:
         P = X
-    uv, diam, peak, inside = _project_many(cams, P, model)
+    optics = Optics.of(cams) if optics is None else optics
+    uv, diam, peak, inside = project_many(optics, P, model.marker_diameter_mm, model.peak_at_4m)
     peak[:, m:] *= model.ghost_gain
     if hidden is not None:
         inside[:, :m] &= ~hidden
@@ -294,7 +267,7 @@ def render_cameras(
         rng.poisson(model.noise_blobs, n) if model.noise_blobs > 0 else np.zeros(n), np.int64
     )
     if n_noise.any() or sun.any():
-        size = np.array([c.size for c in cams], dtype=np.float64) - 1  # (n, 2)
+        size = optics.size - 1  # (n, 2)
         ec = np.concatenate([np.repeat(np.arange(n), n_noise), np.repeat(np.arange(n), sun)])
         k_noise = int(n_noise.sum())
         e_uv = rng.uniform(0.0, 1.0, (ec.size, 2)) * size[ec]
@@ -310,7 +283,7 @@ def render_cameras(
         kind = np.concatenate([kind, e_kind])[order]
     area = np.maximum(np.pi * d * d / 4, 1.0)
     cols = _merge_many(n, cam_of, true_uv, d, pk, area, marker, kind, seen)
-    return _finish_many(cams, *cols, seen, model, rng)
+    return _finish_many(optics.size, *cols, seen, model, rng)
 
 
 #: camera, centroid (px), diameter (px), peak, area (px), marker, kind, elongation
@@ -352,8 +325,7 @@ def _merge_many(
     if j.size == 0:
         return cols
     N = cam_of.size
-    graph = coo_matrix((np.ones(j.size), (idx[j, a], idx[j, b])), shape=(N, N))
-    ncomp, label = connected_components(graph, directed=False)
+    ncomp, label = _components(N, idx[j, a], idx[j, b])
     size = np.bincount(label, minlength=ncomp)
     wsum = np.bincount(label, area, ncomp)
     out_uv = np.stack([np.bincount(label, area * uv[:, k], ncomp) / wsum for k in (0, 1)], 1)
@@ -383,8 +355,52 @@ def _merge_many(
     return (*head, out_kind, np.asarray(elong, np.float64))
 
 
+#: Above this many touching pairs the components are found by scipy's graph search.
+_FEW_PAIRS = 64
+
+
+def _components(n: int, a: I64, b: I64) -> tuple[int, I64]:
+    """Connected components of ``n`` nodes joined by the edges ``a[i] - b[i]``.
+
+    Returns
+    -------
+    ncomp : int
+        Number of components.
+    label : ndarray of int64, shape (n,)
+        Component of each node; components are numbered in the order of their
+        lowest node, as :func:`scipy.sparse.csgraph.connected_components` numbers them.
+
+    Notes
+    -----
+    A frame has a handful of touching pairs among hundreds of blobs: joining them
+    one by one (union-find, the lower node the root) costs far less than building
+    a sparse graph; many pairs (noise, crowded images) go to scipy.
+    """
+    if a.size > _FEW_PAIRS:
+        graph = coo_matrix((np.ones(a.size), (a, b)), shape=(n, n))
+        ncomp, lab = connected_components(graph, directed=False)
+        return int(ncomp), np.asarray(lab, np.int64)
+    parent: dict[int, int] = {}
+
+    def root(x: int) -> int:
+        while x in parent:
+            x = parent[x]
+        return x
+
+    for u, v in zip(a.tolist(), b.tolist(), strict=True):
+        ru, rv = root(u), root(v)
+        if ru != rv:
+            parent[max(ru, rv)] = min(ru, rv)
+    top = np.arange(n)
+    if parent:
+        nodes = list(parent)
+        top[nodes] = [root(x) for x in nodes]
+    rank = np.cumsum(top == np.arange(n)) - 1
+    return int(rank[-1]) + 1, rank[top]
+
+
 def _finish_many(
-    cams: list[Camera], cam_of: I64, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
+    image_size: F64, cam_of: I64, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
     kind: npt.NDArray[np.int8], elong: F64, seen: npt.NDArray[np.int8],
     model: BlobModel, rng: np.random.Generator,
 ) -> list[CameraBlobs]:  # fmt: skip
@@ -396,8 +412,8 @@ def _finish_many(
     nearly coincide pass as one round blob and a small single blob is now and then
     flagged; the truth's ``kind`` says what each blob really is.
     """
-    n = len(cams)
-    size = np.array([c.size for c in cams], dtype=np.float64)[cam_of] - 1  # (N, 2)
+    n = image_size.shape[0]
+    size = image_size[cam_of] - 1  # (N, 2)
     r = d / 2
     noisy = np.clip(true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape), 0, size)
     edge = (true_uv - r[:, None] < 0).any(axis=1) | (true_uv + r[:, None] > size).any(axis=1)

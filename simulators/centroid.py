@@ -28,6 +28,7 @@ import numpy.typing as npt
 
 from spotlab.geometry import Rig
 from spotlab.simulators import centroid_wire as cw
+from spotlab.simulators.blob_optics import Optics
 from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_cameras, sight_blocked
 from spotlab.simulators.centroid_body import carried_by, segment_capsules
 from spotlab.simulators.centroid_poses import body_for
@@ -242,6 +243,10 @@ class CentroidDevice(Mcs1Device[CenConfig]):
         self.ghost_pairs = rng.random((n_cams, markers)) < self.model.ghost_rate
         self._blob_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xB10B]))
         self._on_capsule = carried_by(40)
+        #: The rig's cameras stacked once (every frame renders through them).
+        self._optics = Optics.of(self.rig.cameras)
+        self._on = np.zeros((markers, self._on_capsule.shape[1]), dtype=bool)
+        self._on[:40] = self._on_capsule[: min(markers, 40)]
         super().__init__(
             clock, faults, serial=serial, seed=seed, fault_log=fault_log,
             default_rate_hz=default_rate_hz, fifo_bytes=FIFO_BYTES, now_ns=now_ns, lab=lab,
@@ -280,10 +285,15 @@ class CentroidDevice(Mcs1Device[CenConfig]):
         m = X.shape[0]
         if not self.occlusion or m < 40 or self.motion is not None:
             return np.zeros((len(cameras), m), dtype=bool)
-        on = np.zeros((m, self._on_capsule.shape[1]), dtype=bool)
-        on[:40] = self._on_capsule
-        centers = np.stack([self.rig.cameras[c].center for c in cameras])
+        on = self._on if m == self._on.shape[0] else carried_by(m)
+        centers = self._cameras_optics(cameras).centers
         return sight_blocked(centers, X, *segment_capsules(X[:40]), on)
+
+    def _cameras_optics(self, cameras: list[int]) -> Optics:
+        """The stacked optics of these cameras of the rig."""
+        if cameras == list(range(len(self.rig.cameras))):
+            return self._optics
+        return self._optics.select(cameras)
 
     def render(
         self, camera: int, X: F64, sun_blobs: int = 0, hidden: npt.NDArray[np.bool_] | None = None
@@ -301,6 +311,7 @@ class CentroidDevice(Mcs1Device[CenConfig]):
         return render_cameras(
             [self.rig.cameras[c] for c in cameras], X, self.model, self._blob_rng,
             hidden=hidden, ghosts=self.ghost_pairs[cameras], sun_blobs=sun_blobs,
+            optics=self._cameras_optics(cameras),
         )  # fmt: skip
 
     # -- life cycle ----------------------------------------------------------------
