@@ -36,7 +36,7 @@ from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
 from spotlab.simulators.faults import FaultInjector
-from spotlab.simulators.lab import LabPublisher
+from spotlab.simulators.lab import LabPublisher, frame_start
 from spotlab.simulators.mcs1_commands import Handler
 from spotlab.simulators.mcs1_device import Mcs1Device
 from spotlab.simulators.mcs1_stream import Mcs1Stream, TakenFrame
@@ -51,6 +51,8 @@ PROCESSING_S = 300e-6
 #: Sunlight blobs per frame on a sunlit camera.
 SUN_BLOBS = 3000
 FIFO_BYTES = 1 << 20
+#: Frames whose marker positions are computed in one pass (fewer for large scenes).
+SCENE_BLOCK = 32
 
 
 @dataclass
@@ -89,6 +91,38 @@ class CentroidStream(Mcs1Stream):
         self.cconfig = config
         self.cams = config.cameras()
         super().__init__(device.clock, index, config.rate_mhz, start_ns)
+        cells = (len(self.cams) + 1) * device.n_markers
+        #: Frames whose scene is computed at once (:meth:`_scene`).
+        self._block = max(1, min(SCENE_BLOCK, 20_000 // max(cells, 1)))
+        self._block_start = -1
+        self._block_w_trig = np.zeros(0)
+        self._block_times = np.zeros((0, len(self.cams) + 1))
+        self._block_X = np.zeros((0, len(self.cams) + 1, device.n_markers, 3))
+
+    def _scene(self) -> tuple[float, F64, F64]:
+        """The trigger (world ns), the scene times (n + 1,) s of each camera's exposure
+        mid-point and the hub's, and the markers there (n + 1, M, 3) mm, of this frame.
+
+        Frame times follow from the frame number alone (:func:`frame_start`), so the
+        scene of :attr:`_block` frames is computed in one pass; each is the same, to
+        the bit, as the frame's own.
+        """
+        k = self.frame_no
+        if not self._block_start <= k < self._block_start + self._block_w_trig.size:
+            dev, half = self.device, self.cconfig.exposure_us * 0.5e-6
+            osc0 = [self._osc0] + [
+                frame_start(self.clock, self.start_osc, self.period_s, i)[1]
+                for i in range(k + 1, k + self._block)
+            ]
+            w_trig = self.clock.world_ns(np.array(osc0))  # (B,)
+            w_exp = w_trig[:, None] + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (B, n)
+            t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
+            times = np.concatenate([(w_exp - self.clock.epoch_ns) * 1e-9, t_mid[:, None]], 1)
+            X = dev.positions(times.reshape(-1))
+            self._block_start, self._block_w_trig, self._block_times = k, w_trig, times
+            self._block_X = X.reshape(*times.shape, *X.shape[1:])
+        i = k - self._block_start
+        return float(self._block_w_trig[i]), self._block_times[i], self._block_X[i]
 
     def _ready_osc(self, osc0: float) -> float:
         """After the latest camera's exposure, and the readout."""
@@ -97,14 +131,12 @@ class CentroidStream(Mcs1Stream):
     def take(self) -> TakenFrame:
         """Expose every enabled camera, render the blobs, write the truth, schedule the next."""
         dev, cfg = self.device, self.cconfig
-        w_trig = float(self.clock.world_ns(self._osc0))
+        w_trig, times, X_both = self._scene()  # times (n + 1,), X_both (n + 1, M, 3)
         since_start = (w_trig - self.start_ns) * 1e-9
         half = cfg.exposure_us * 0.5e-6
         w_exp = w_trig + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (n,)
-        scene_s = (w_exp - self.clock.epoch_ns) * 1e-9
+        scene_s, t_mid = times[:-1], float(times[-1])
         online = [not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams]
-        t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
-        X_both = dev.positions(np.append(scene_s, t_mid))  # (n + 1, M, 3)
         X_all = X_both[:-1]
         hidden = dev.occluded(X_all[0], self.cams)
         live = [j for j, c in enumerate(self.cams) if online[j]]
