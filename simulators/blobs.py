@@ -110,6 +110,11 @@ class CameraBlobs:
     seen: npt.NDArray[np.int8]
 
 
+def _unit(x: F64) -> F64:
+    """``x`` clipped to [0, 1] (NaN stays NaN)."""
+    return np.minimum(np.maximum(x, 0.0), 1.0)
+
+
 def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B:
     """Lines of sight ``centers[c] -> X[m]`` crossing a capsule the marker is not on.
 
@@ -145,15 +150,16 @@ def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B
     cc = np.einsum("cmi,cki->cmk", d1, r)
     denom = aa * ee - bb * bb
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(denom > 1e-9, np.clip((bb * ff - cc * ee) / denom, 0, 1), 0.0)
+        s = np.where(denom > 1e-9, _unit((bb * ff - cc * ee) / denom), 0.0)
         t = (bb * s + ff) / ee
-        s = np.where(
-            t < 0, np.clip(-cc / aa, 0, 1), np.where(t > 1, np.clip((bb - cc) / aa, 0, 1), s)
-        )
-    t = np.clip(t, 0, 1)
-    p1 = c0[:, :, None, :] + s[..., None] * d1[:, :, None, :]
-    p2 = a + t[..., None] * d2
-    dist = np.linalg.norm(p1 - p2, axis=3)
+        s = np.where(t < 0, _unit(-cc / aa), np.where(t > 1, _unit((bb - cc) / aa), s))
+    t = _unit(t)
+    # |p1 - p2| coordinate by coordinate on (C, M, K) arrays, p1 = c0 + s d1, p2 = a + t d2
+    # (the sums in the order of a norm over the last axis: the same bits).
+    dx, dy, dz = (
+        (c0[:, :, None, i] + s * d1[:, :, None, i]) - (a[:, i] + t * d2[:, i]) for i in range(3)
+    )
+    dist = np.sqrt((dx * dx + dy * dy) + dz * dz)
     length = np.sqrt(aa)
     in_front = s * length < length - radius - 20.0
     return np.asarray(((dist < radius) & in_front & ~on[None]).any(axis=2))

@@ -140,11 +140,18 @@ class CentroidStream(Mcs1Stream):
         X_all = X_both[:-1]
         hidden = dev.occluded(X_all[0], self.cams)
         live = [j for j, c in enumerate(self.cams) if online[j]]
+        sun = [
+            SUN_BLOBS if any(e.active(self.cams[j], since_start) for e in dev.sunlight) else 0
+            for j in live
+        ]
         rendered = dict(
-            zip(live, dev.render_many([self.cams[j] for j in live], X_all[live], hidden[live],
-                [SUN_BLOBS if any(e.active(self.cams[j], since_start) for e in dev.sunlight)
-                 else 0 for j in live]), strict=True)
+            zip(live, dev.render_many([self.cams[j] for j in live], X_all[live], hidden[live], sun),
+                strict=True)
         )  # fmt: skip
+        keep = {j: min(b.uv.shape[0], cfg.max_blobs) for j, b in rendered.items()}
+        sent = dict(
+            zip(rendered, _quantised(list(rendered.values()), list(keep.values())), strict=True)
+        )
         records = []
         truth_cams: list[CameraTruth] = []
         for j, c in enumerate(self.cams):
@@ -154,17 +161,14 @@ class CentroidStream(Mcs1Stream):
                 continue
             blobs = rendered[j]
             n_found = blobs.uv.shape[0]
-            keep = min(n_found, cfg.max_blobs)
             tick = round(dev.camera_clocks[c].device_us(round(w_exp[j])))
             records.append(
                 cw.CameraRecord(
-                    c, cw.CAM_OVERFLOW if n_found > keep else 0, n_found, self.frame_no, tick,
-                    cw.quantise_blobs(
-                        blobs.uv[:keep], blobs.area[:keep], blobs.peak[:keep], blobs.flags[:keep]
-                    ),
+                    c, cw.CAM_OVERFLOW if n_found > keep[j] else 0, n_found, self.frame_no, tick,
+                    sent[j],
                 )
             )  # fmt: skip
-            truth_cams.append((blobs, keep, tick, float(scene_s[j])))
+            truth_cams.append((blobs, keep[j], tick, float(scene_s[j])))
         payload = cw.cen_payload(
             self.frame_no, self._tick, 0, cfg.camera_mask, cfg.max_blobs, cfg.exposure_us,
             cfg.threshold, records,
@@ -182,6 +186,18 @@ class CentroidStream(Mcs1Stream):
 
 
 _NO_BLOBS = cw.quantise_blobs(np.zeros((0, 2)), [], [], [])
+
+
+def _quantised(cameras: list[CameraBlobs], keep: list[int]) -> list[npt.NDArray[np.void]]:
+    """The wire blobs of each camera: its first ``keep`` blobs, all cameras quantised at once."""
+    if not cameras:
+        return []
+    cut = [
+        (b.uv[:k], b.area[:k], b.peak[:k], b.flags[:k]) for b, k in zip(cameras, keep, strict=True)
+    ]
+    blobs = cw.quantise_blobs(*(np.concatenate(col) for col in zip(*cut, strict=True)))
+    ends = np.cumsum(keep).tolist()
+    return [blobs[e - k : e] for e, k in zip(ends, keep, strict=True)]
 
 
 class CentroidDevice(Mcs1Device[CenConfig]):
