@@ -312,26 +312,17 @@ def _merge_many(
     the largest image names a merged blob; ``seen`` marks its members ``IN_MERGED``.
     """
     counts = np.bincount(cam_of, minlength=n)
-    starts = np.concatenate([[0], np.cumsum(counts)])
     todo = np.flatnonzero((counts > 1) & (counts <= MERGE_LIMIT))
     cols: _Cols = (cam_of, uv, d, pk, area, marker, kind, np.ones(cam_of.size))
     if todo.size == 0:
         return cols
-    slot = np.arange(int(counts[todo].max()))
-    valid = slot < counts[todo][:, None]
-    idx = np.where(valid, starts[todo][:, None] + slot, 0)
-    pu, pv = np.where(valid, uv[idx, 0], np.nan), uv[idx, 1]
-    pd = d[idx]
-    du = pu[:, :, None] - pu[:, None, :]
-    dv = pv[:, :, None] - pv[:, None, :]
-    reach = pd[:, :, None] + pd[:, None, :]
-    with np.errstate(invalid="ignore"):
-        touch = np.triu(4 * (du * du + dv * dv) < reach * reach, k=1)
-    j, a, b = np.nonzero(touch)
-    if j.size == 0:
+    tested = np.zeros(n, dtype=bool)
+    tested[todo] = True
+    a, b = _touching(cam_of, uv, d, tested)
+    if a.size == 0:
         return cols
     N = cam_of.size
-    ncomp, label = _components(N, idx[j, a], idx[j, b])
+    ncomp, label = _components(N, a, b)
     size = np.bincount(label, minlength=ncomp)
     wsum = np.bincount(label, area, ncomp)
     out_uv = np.stack([np.bincount(label, area * uv[:, k], ncomp) / wsum for k in (0, 1)], 1)
@@ -359,6 +350,54 @@ def _merge_many(
     out_d = np.asarray(2 * np.sqrt(wsum / np.pi), np.float64)
     head = (cam_of[first], out_uv, out_d, out_pk, np.asarray(wsum, np.float64), out_marker)
     return (*head, out_kind, np.asarray(elong, np.float64))
+
+
+def _touching(cam_of: I64, uv: F64, d: F64, tested: B) -> tuple[I64, I64]:
+    """Pairs of blobs of one camera whose discs overlap: ``4 |uv_a - uv_b|^2 < (d_a + d_b)^2``.
+
+    Parameters
+    ----------
+    cam_of : ndarray of int64, shape (N,)
+        Camera of each blob.
+    uv, d : ndarray, shapes (N, 2), (N,)
+        Centres and diameters (px).
+    tested : ndarray of bool, shape (n,)
+        Cameras whose blobs are tested.
+
+    Returns
+    -------
+    a, b : ndarray of int64, shape (P,)
+        The pairs (blob indices), each once.
+
+    Notes
+    -----
+    Blobs sorted by camera, then ``v``: only those within a diameter below a blob (in
+    ``v``, same camera) can overlap it; the overlap test itself is exact on them.
+    """
+    sel = np.flatnonzero(tested[cam_of])
+    none = np.zeros(0, np.int64)
+    if sel.size < 2:
+        return none, none
+    key = cam_of[sel] * _CAMERA_KEY + uv[sel, 1]
+    rank = np.argsort(key, kind="stable")
+    order, key = sel[rank], key[rank]
+    bound = 1.01 * float(d[sel].max()) + 1e-3  # > half of any reach: those never overlap
+    m = order.size
+    count = np.searchsorted(key, key + bound, side="right") - np.arange(1, m + 1)
+    total = int(count.sum())
+    if total == 0:
+        return none, none
+    first = np.repeat(np.arange(m), count)
+    second = first + 1 + np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    x, y = order[first], order[second]
+    du, dv = uv[x, 0] - uv[y, 0], uv[x, 1] - uv[y, 1]
+    reach = d[x] + d[y]
+    hit = 4 * (du * du + dv * dv) < reach * reach
+    return x[hit], y[hit]
+
+
+#: Camera spacing of the sort key of :func:`_touching` (px, far beyond any image).
+_CAMERA_KEY = 1 << 20
 
 
 #: Above this many touching pairs the components are found by scipy's graph search.
