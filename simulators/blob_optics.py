@@ -105,12 +105,15 @@ def project_many(
     """
     o = optics
     k1, k2, k3, p1, p2 = o.k1, o.k2, o.k3, o.p1, o.p2
+    R, X = o.R[..., None], (P[..., 0], P[..., 1], P[..., 2])
     with np.errstate(invalid="ignore", divide="ignore"):
-        xc = np.einsum("nij,nkj->nki", o.R, P) + o.t[:, None, :]
-        z = xc[..., 2]
+        # R X + t per coordinate, summed in the order numpy's einsum sums three terms.
+        xc = [(R[:, i, 0] * X[0] + R[:, i, 2] * X[2]) + R[:, i, 1] * X[1] + o.t[:, i, None]
+              for i in range(3)]  # fmt: skip
+        z = xc[2]
         good = np.isfinite(z) & (z > 100.0)
         zz = np.where(good, z, 1.0)
-        x, y = xc[..., 0] / zz, xc[..., 1] / zz
+        x, y = xc[0] / zz, xc[1] / zz
         r2 = x * x + y * y
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
         xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
@@ -121,5 +124,6 @@ def project_many(
     diameter = np.where(good, o.fx * diameter_mm / zz, 0.0)
     peak = np.where(good, peak_at_4m * (4000.0 / zz) ** 2, 0.0)
     with np.errstate(invalid="ignore"):
-        inside = good & (uv >= 0).all(axis=-1) & (uv <= o.size[:, None, :] - 1).all(axis=-1)
+        width, height = o.size[:, 0, None] - 1, o.size[:, 1, None] - 1
+        inside = good & (u >= 0) & (v >= 0) & (u <= width) & (v <= height)
     return uv, diameter, peak, np.asarray(inside)

@@ -147,7 +147,9 @@ def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B
     ee = np.maximum(np.einsum("ki,ki->k", d2, d2), 1e-9)  # (K,)
     ff = np.einsum("ki,cki->ck", d2, r)[:, None, :]  # (C, 1, K)
     bb = d1 @ d2.T  # (C, M, K)
-    cc = np.einsum("cmi,cki->cmk", d1, r)
+    # d1 . r (C, M, K), summed in the order numpy's einsum sums three terms.
+    t0, t1, t2 = (d1[:, :, None, i] * r[:, None, :, i] for i in range(3))
+    cc = (t0 + t2) + t1
     denom = aa * ee - bb * bb
     with np.errstate(divide="ignore", invalid="ignore"):
         s = np.where(denom > 1e-9, _unit((bb * ff - cc * ee) / denom), 0.0)
