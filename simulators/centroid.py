@@ -136,14 +136,16 @@ class CentroidStream(Mcs1Stream):
         half = cfg.exposure_us * 0.5e-6
         w_exp = w_trig + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (n,)
         scene_s, t_mid = times[:-1], float(times[-1])
-        online = [not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams]
+        online = [
+            not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams
+        ] if dev.camera_off else [True] * len(self.cams)  # fmt: skip
         X_all = X_both[:-1]
         hidden = dev.occluded(X_all[0], self.cams)
         live = [j for j, c in enumerate(self.cams) if online[j]]
         sun = [
             SUN_BLOBS if any(e.active(self.cams[j], since_start) for e in dev.sunlight) else 0
             for j in live
-        ]
+        ] if dev.sunlight else [0] * len(live)  # fmt: skip
         rendered = dict(
             zip(live, dev.render_many([self.cams[j] for j in live], X_all[live], hidden[live], sun),
                 strict=True)
