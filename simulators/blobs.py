@@ -27,6 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from spotlab.geometry import Camera
+from spotlab.simulators.blob_optics import Optics, project_many
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -109,6 +110,11 @@ class CameraBlobs:
     seen: npt.NDArray[np.int8]
 
 
+def _unit(x: F64) -> F64:
+    """``x`` clipped to [0, 1] (NaN stays NaN)."""
+    return np.minimum(np.maximum(x, 0.0), 1.0)
+
+
 def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B:
     """Lines of sight ``centers[c] -> X[m]`` crossing a capsule the marker is not on.
 
@@ -141,53 +147,24 @@ def sight_blocked(centers: F64, X: F64, a: F64, b: F64, radius: F64, on: B) -> B
     ee = np.maximum(np.einsum("ki,ki->k", d2, d2), 1e-9)  # (K,)
     ff = np.einsum("ki,cki->ck", d2, r)[:, None, :]  # (C, 1, K)
     bb = d1 @ d2.T  # (C, M, K)
-    cc = np.einsum("cmi,cki->cmk", d1, r)
+    # d1 . r (C, M, K), summed in the order numpy's einsum sums three terms.
+    t0, t1, t2 = (d1[:, :, None, i] * r[:, None, :, i] for i in range(3))
+    cc = (t0 + t2) + t1
     denom = aa * ee - bb * bb
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(denom > 1e-9, np.clip((bb * ff - cc * ee) / denom, 0, 1), 0.0)
+        s = np.where(denom > 1e-9, _unit((bb * ff - cc * ee) / denom), 0.0)
         t = (bb * s + ff) / ee
-        s = np.where(
-            t < 0, np.clip(-cc / aa, 0, 1), np.where(t > 1, np.clip((bb - cc) / aa, 0, 1), s)
-        )
-    t = np.clip(t, 0, 1)
-    p1 = c0[:, :, None, :] + s[..., None] * d1[:, :, None, :]
-    p2 = a + t[..., None] * d2
-    dist = np.linalg.norm(p1 - p2, axis=3)
+        s = np.where(t < 0, _unit(-cc / aa), np.where(t > 1, _unit((bb - cc) / aa), s))
+    t = _unit(t)
+    # |p1 - p2| coordinate by coordinate on (C, M, K) arrays, p1 = c0 + s d1, p2 = a + t d2
+    # (the sums in the order of a norm over the last axis: the same bits).
+    dx, dy, dz = (
+        (c0[:, :, None, i] + s * d1[:, :, None, i]) - (a[:, i] + t * d2[:, i]) for i in range(3)
+    )
+    dist = np.sqrt((dx * dx + dy * dy) + dz * dz)
     length = np.sqrt(aa)
     in_front = s * length < length - radius - 20.0
     return np.asarray(((dist < radius) & in_front & ~on[None]).any(axis=2))
-
-
-def _project_many(cams: list[Camera], P: F64, model: BlobModel) -> tuple[F64, F64, F64, B]:
-    """Image centroids (n, N, 2), diameters (px), raw peaks and in-view flags (n, N).
-
-    ``P`` (n, N, 3) holds the points each of the ``n`` cameras sees (NaN: none): one
-    projection for all cameras, each with its own lens (the Brown model of
-    :func:`spotlab.geometry.distortion.distort_normalized`, per camera).
-    """
-    R = np.stack([c.R for c in cams])  # (n, 3, 3)
-    t = np.stack([c.t for c in cams])  # (n, 3)
-    K = np.stack([c.K for c in cams])  # (n, 3, 3)
-    k1, k2, p1, p2, k3 = np.stack([c.dist for c in cams]).T[:, :, None]  # (n, 1) each
-    with np.errstate(invalid="ignore", divide="ignore"):
-        xc = np.einsum("nij,nkj->nki", R, P) + t[:, None, :]
-        z = xc[..., 2]
-        good = np.isfinite(z) & (z > 100.0)
-        zz = np.where(good, z, 1.0)
-        x, y = xc[..., 0] / zz, xc[..., 1] / zz
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    u = K[:, 0, 0, None] * xd + K[:, 0, 1, None] * yd + K[:, 0, 2, None]
-    v = K[:, 1, 1, None] * yd + K[:, 1, 2, None]
-    uv = np.where(good[..., None], np.stack([u, v], axis=-1), np.nan)
-    size = np.array([c.size for c in cams], dtype=np.float64)  # (n, 2)
-    diameter = np.where(good, K[:, 0, 0, None] * model.marker_diameter_mm / zz, 0.0)
-    peak = np.where(good, model.peak_at_4m * (4000.0 / zz) ** 2, 0.0)
-    with np.errstate(invalid="ignore"):
-        inside = good & (uv >= 0).all(axis=-1) & (uv <= size[:, None, :] - 1).all(axis=-1)
-    return uv, diameter, peak, np.asarray(inside)
 
 
 def render_camera(
@@ -248,6 +225,7 @@ def render_cameras(
     hidden: B | None = None,
     ghosts: B | None = None,
     sun_blobs: list[int] | None = None,
+    optics: Optics | None = None,
 ) -> list[CameraBlobs]:
     """The blobs of ``n`` cameras in one frame, rendered together.
 
@@ -267,6 +245,8 @@ def render_cameras(
         Markers whose floor reflection each camera sees.
     sun_blobs : list of int, length n, optional
         Sunlight blobs to add per camera (random, bright).
+    optics : Optics, optional
+        ``cams`` stacked (:meth:`Optics.of`), when the caller keeps them between frames.
 
     Returns
     -------
@@ -279,7 +259,8 @@ def render_cameras(
         P = np.concatenate([X, np.where(ghosts[..., None], mirror, np.nan)], axis=1)
     else:
         P = X
-    uv, diam, peak, inside = _project_many(cams, P, model)
+    optics = Optics.of(cams) if optics is None else optics
+    uv, diam, peak, inside = project_many(optics, P, model.marker_diameter_mm, model.peak_at_4m)
     peak[:, m:] *= model.ghost_gain
     if hidden is not None:
         inside[:, :m] &= ~hidden
@@ -294,7 +275,7 @@ def render_cameras(
         rng.poisson(model.noise_blobs, n) if model.noise_blobs > 0 else np.zeros(n), np.int64
     )
     if n_noise.any() or sun.any():
-        size = np.array([c.size for c in cams], dtype=np.float64) - 1  # (n, 2)
+        size = optics.size - 1  # (n, 2)
         ec = np.concatenate([np.repeat(np.arange(n), n_noise), np.repeat(np.arange(n), sun)])
         k_noise = int(n_noise.sum())
         e_uv = rng.uniform(0.0, 1.0, (ec.size, 2)) * size[ec]
@@ -310,7 +291,7 @@ def render_cameras(
         kind = np.concatenate([kind, e_kind])[order]
     area = np.maximum(np.pi * d * d / 4, 1.0)
     cols = _merge_many(n, cam_of, true_uv, d, pk, area, marker, kind, seen)
-    return _finish_many(cams, *cols, seen, model, rng)
+    return _finish_many(optics.size, *cols, seen, model, rng)
 
 
 #: camera, centroid (px), diameter (px), peak, area (px), marker, kind, elongation
@@ -333,27 +314,17 @@ def _merge_many(
     the largest image names a merged blob; ``seen`` marks its members ``IN_MERGED``.
     """
     counts = np.bincount(cam_of, minlength=n)
-    starts = np.concatenate([[0], np.cumsum(counts)])
     todo = np.flatnonzero((counts > 1) & (counts <= MERGE_LIMIT))
     cols: _Cols = (cam_of, uv, d, pk, area, marker, kind, np.ones(cam_of.size))
     if todo.size == 0:
         return cols
-    slot = np.arange(int(counts[todo].max()))
-    valid = slot < counts[todo][:, None]
-    idx = np.where(valid, starts[todo][:, None] + slot, 0)
-    pu, pv = np.where(valid, uv[idx, 0], np.nan), uv[idx, 1]
-    pd = d[idx]
-    du = pu[:, :, None] - pu[:, None, :]
-    dv = pv[:, :, None] - pv[:, None, :]
-    reach = pd[:, :, None] + pd[:, None, :]
-    with np.errstate(invalid="ignore"):
-        touch = np.triu(4 * (du * du + dv * dv) < reach * reach, k=1)
-    j, a, b = np.nonzero(touch)
-    if j.size == 0:
+    tested = np.zeros(n, dtype=bool)
+    tested[todo] = True
+    a, b = _touching(cam_of, uv, d, tested)
+    if a.size == 0:
         return cols
     N = cam_of.size
-    graph = coo_matrix((np.ones(j.size), (idx[j, a], idx[j, b])), shape=(N, N))
-    ncomp, label = connected_components(graph, directed=False)
+    ncomp, label = _components(N, a, b)
     size = np.bincount(label, minlength=ncomp)
     wsum = np.bincount(label, area, ncomp)
     out_uv = np.stack([np.bincount(label, area * uv[:, k], ncomp) / wsum for k in (0, 1)], 1)
@@ -383,8 +354,100 @@ def _merge_many(
     return (*head, out_kind, np.asarray(elong, np.float64))
 
 
+def _touching(cam_of: I64, uv: F64, d: F64, tested: B) -> tuple[I64, I64]:
+    """Pairs of blobs of one camera whose discs overlap: ``4 |uv_a - uv_b|^2 < (d_a + d_b)^2``.
+
+    Parameters
+    ----------
+    cam_of : ndarray of int64, shape (N,)
+        Camera of each blob.
+    uv, d : ndarray, shapes (N, 2), (N,)
+        Centres and diameters (px).
+    tested : ndarray of bool, shape (n,)
+        Cameras whose blobs are tested.
+
+    Returns
+    -------
+    a, b : ndarray of int64, shape (P,)
+        The pairs (blob indices), each once.
+
+    Notes
+    -----
+    Blobs sorted by camera, then ``v``: only those within a diameter below a blob (in
+    ``v``, same camera) can overlap it; the overlap test itself is exact on them.
+    """
+    sel = np.flatnonzero(tested[cam_of])
+    none = np.zeros(0, np.int64)
+    if sel.size < 2:
+        return none, none
+    key = cam_of[sel] * _CAMERA_KEY + uv[sel, 1]
+    rank = np.argsort(key, kind="stable")
+    order, key = sel[rank], key[rank]
+    bound = 1.01 * float(d[sel].max()) + 1e-3  # > half of any reach: those never overlap
+    m = order.size
+    count = np.searchsorted(key, key + bound, side="right") - np.arange(1, m + 1)
+    total = int(count.sum())
+    if total == 0:
+        return none, none
+    first = np.repeat(np.arange(m), count)
+    second = first + 1 + np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    x, y = order[first], order[second]
+    du, dv = uv[x, 0] - uv[y, 0], uv[x, 1] - uv[y, 1]
+    reach = d[x] + d[y]
+    hit = 4 * (du * du + dv * dv) < reach * reach
+    return x[hit], y[hit]
+
+
+#: Camera spacing of the sort key of :func:`_touching` (px, far beyond any image).
+_CAMERA_KEY = 1 << 20
+
+
+#: Above this many touching pairs the components are found by scipy's graph search.
+_FEW_PAIRS = 64
+
+
+def _components(n: int, a: I64, b: I64) -> tuple[int, I64]:
+    """Connected components of ``n`` nodes joined by the edges ``a[i] - b[i]``.
+
+    Returns
+    -------
+    ncomp : int
+        Number of components.
+    label : ndarray of int64, shape (n,)
+        Component of each node; components are numbered in the order of their
+        lowest node, as :func:`scipy.sparse.csgraph.connected_components` numbers them.
+
+    Notes
+    -----
+    A frame has a handful of touching pairs among hundreds of blobs: joining them
+    one by one (union-find, the lower node the root) costs far less than building
+    a sparse graph; many pairs (noise, crowded images) go to scipy.
+    """
+    if a.size > _FEW_PAIRS:
+        graph = coo_matrix((np.ones(a.size), (a, b)), shape=(n, n))
+        ncomp, lab = connected_components(graph, directed=False)
+        return int(ncomp), np.asarray(lab, np.int64)
+    parent: dict[int, int] = {}
+
+    def root(x: int) -> int:
+        while x in parent:
+            x = parent[x]
+        return x
+
+    for u, v in zip(a.tolist(), b.tolist(), strict=True):
+        ru, rv = root(u), root(v)
+        if ru != rv:
+            parent[max(ru, rv)] = min(ru, rv)
+    top = np.arange(n)
+    if parent:
+        nodes = list(parent)
+        top[nodes] = [root(x) for x in nodes]
+    rank = np.cumsum(top == np.arange(n)) - 1
+    return int(rank[-1]) + 1, rank[top]
+
+
 def _finish_many(
-    cams: list[Camera], cam_of: I64, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
+    image_size: F64, cam_of: I64, true_uv: F64, d: F64, pk: F64, area: F64, marker: I64,
     kind: npt.NDArray[np.int8], elong: F64, seen: npt.NDArray[np.int8],
     model: BlobModel, rng: np.random.Generator,
 ) -> list[CameraBlobs]:  # fmt: skip
@@ -396,8 +459,8 @@ def _finish_many(
     nearly coincide pass as one round blob and a small single blob is now and then
     flagged; the truth's ``kind`` says what each blob really is.
     """
-    n = len(cams)
-    size = np.array([c.size for c in cams], dtype=np.float64)[cam_of] - 1  # (N, 2)
+    n = image_size.shape[0]
+    size = image_size[cam_of] - 1  # (N, 2)
     r = d / 2
     noisy = np.clip(true_uv + rng.normal(0.0, model.centroid_noise_px, true_uv.shape), 0, size)
     edge = (true_uv - r[:, None] < 0).any(axis=1) | (true_uv + r[:, None] > size).any(axis=1)

@@ -28,6 +28,7 @@ import numpy.typing as npt
 
 from spotlab.geometry import Rig
 from spotlab.simulators import centroid_wire as cw
+from spotlab.simulators.blob_optics import Optics
 from spotlab.simulators.blobs import BlobModel, CameraBlobs, render_cameras, sight_blocked
 from spotlab.simulators.centroid_body import carried_by, segment_capsules
 from spotlab.simulators.centroid_poses import body_for
@@ -35,7 +36,7 @@ from spotlab.simulators.centroid_truth import CameraTruth, CentroidTruth
 from spotlab.simulators.clock import DeviceClock
 from spotlab.simulators.commands import Command, CommandError
 from spotlab.simulators.faults import FaultInjector
-from spotlab.simulators.lab import LabPublisher
+from spotlab.simulators.lab import LabPublisher, frame_start
 from spotlab.simulators.mcs1_commands import Handler
 from spotlab.simulators.mcs1_device import Mcs1Device
 from spotlab.simulators.mcs1_stream import Mcs1Stream, TakenFrame
@@ -50,6 +51,8 @@ PROCESSING_S = 300e-6
 #: Sunlight blobs per frame on a sunlit camera.
 SUN_BLOBS = 3000
 FIFO_BYTES = 1 << 20
+#: Frames whose marker positions are computed in one pass (fewer for large scenes).
+SCENE_BLOCK = 32
 
 
 @dataclass
@@ -88,6 +91,38 @@ class CentroidStream(Mcs1Stream):
         self.cconfig = config
         self.cams = config.cameras()
         super().__init__(device.clock, index, config.rate_mhz, start_ns)
+        cells = (len(self.cams) + 1) * device.n_markers
+        #: Frames whose scene is computed at once (:meth:`_scene`).
+        self._block = max(1, min(SCENE_BLOCK, 20_000 // max(cells, 1)))
+        self._block_start = -1
+        self._block_w_trig = np.zeros(0)
+        self._block_times = np.zeros((0, len(self.cams) + 1))
+        self._block_X = np.zeros((0, len(self.cams) + 1, device.n_markers, 3))
+
+    def _scene(self) -> tuple[float, F64, F64]:
+        """The trigger (world ns), the scene times (n + 1,) s of each camera's exposure
+        mid-point and the hub's, and the markers there (n + 1, M, 3) mm, of this frame.
+
+        Frame times follow from the frame number alone (:func:`frame_start`), so the
+        scene of :attr:`_block` frames is computed in one pass; each is the same, to
+        the bit, as the frame's own.
+        """
+        k = self.frame_no
+        if not self._block_start <= k < self._block_start + self._block_w_trig.size:
+            dev, half = self.device, self.cconfig.exposure_us * 0.5e-6
+            osc0 = [self._osc0] + [
+                frame_start(self.clock, self.start_osc, self.period_s, i)[1]
+                for i in range(k + 1, k + self._block)
+            ]
+            w_trig = self.clock.world_ns(np.array(osc0))  # (B,)
+            w_exp = w_trig[:, None] + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (B, n)
+            t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
+            times = np.concatenate([(w_exp - self.clock.epoch_ns) * 1e-9, t_mid[:, None]], 1)
+            X = dev.positions(times.reshape(-1))
+            self._block_start, self._block_w_trig, self._block_times = k, w_trig, times
+            self._block_X = X.reshape(*times.shape, *X.shape[1:])
+        i = k - self._block_start
+        return float(self._block_w_trig[i]), self._block_times[i], self._block_X[i]
 
     def _ready_osc(self, osc0: float) -> float:
         """After the latest camera's exposure, and the readout."""
@@ -96,22 +131,29 @@ class CentroidStream(Mcs1Stream):
     def take(self) -> TakenFrame:
         """Expose every enabled camera, render the blobs, write the truth, schedule the next."""
         dev, cfg = self.device, self.cconfig
-        w_trig = float(self.clock.world_ns(self._osc0))
+        w_trig, times, X_both = self._scene()  # times (n + 1,), X_both (n + 1, M, 3)
         since_start = (w_trig - self.start_ns) * 1e-9
         half = cfg.exposure_us * 0.5e-6
         w_exp = w_trig + (dev.trigger_delay_s[self.cams] + half) * 1e9  # (n,)
-        scene_s = (w_exp - self.clock.epoch_ns) * 1e-9
-        online = [not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams]
-        t_mid = (w_trig + half * 1e9 - self.clock.epoch_ns) * 1e-9
-        X_both = dev.positions(np.append(scene_s, t_mid))  # (n + 1, M, 3)
+        scene_s, t_mid = times[:-1], float(times[-1])
+        online = [
+            not any(e.active(c, since_start) for e in dev.camera_off) for c in self.cams
+        ] if dev.camera_off else [True] * len(self.cams)  # fmt: skip
         X_all = X_both[:-1]
         hidden = dev.occluded(X_all[0], self.cams)
         live = [j for j, c in enumerate(self.cams) if online[j]]
+        sun = [
+            SUN_BLOBS if any(e.active(self.cams[j], since_start) for e in dev.sunlight) else 0
+            for j in live
+        ] if dev.sunlight else [0] * len(live)  # fmt: skip
         rendered = dict(
-            zip(live, dev.render_many([self.cams[j] for j in live], X_all[live], hidden[live],
-                [SUN_BLOBS if any(e.active(self.cams[j], since_start) for e in dev.sunlight)
-                 else 0 for j in live]), strict=True)
+            zip(live, dev.render_many([self.cams[j] for j in live], X_all[live], hidden[live], sun),
+                strict=True)
         )  # fmt: skip
+        keep = {j: min(b.uv.shape[0], cfg.max_blobs) for j, b in rendered.items()}
+        sent = dict(
+            zip(rendered, _quantised(list(rendered.values()), list(keep.values())), strict=True)
+        )
         records = []
         truth_cams: list[CameraTruth] = []
         for j, c in enumerate(self.cams):
@@ -121,17 +163,14 @@ class CentroidStream(Mcs1Stream):
                 continue
             blobs = rendered[j]
             n_found = blobs.uv.shape[0]
-            keep = min(n_found, cfg.max_blobs)
             tick = round(dev.camera_clocks[c].device_us(round(w_exp[j])))
             records.append(
                 cw.CameraRecord(
-                    c, cw.CAM_OVERFLOW if n_found > keep else 0, n_found, self.frame_no, tick,
-                    cw.quantise_blobs(
-                        blobs.uv[:keep], blobs.area[:keep], blobs.peak[:keep], blobs.flags[:keep]
-                    ),
+                    c, cw.CAM_OVERFLOW if n_found > keep[j] else 0, n_found, self.frame_no, tick,
+                    sent[j],
                 )
             )  # fmt: skip
-            truth_cams.append((blobs, keep, tick, float(scene_s[j])))
+            truth_cams.append((blobs, keep[j], tick, float(scene_s[j])))
         payload = cw.cen_payload(
             self.frame_no, self._tick, 0, cfg.camera_mask, cfg.max_blobs, cfg.exposure_us,
             cfg.threshold, records,
@@ -149,6 +188,18 @@ class CentroidStream(Mcs1Stream):
 
 
 _NO_BLOBS = cw.quantise_blobs(np.zeros((0, 2)), [], [], [])
+
+
+def _quantised(cameras: list[CameraBlobs], keep: list[int]) -> list[npt.NDArray[np.void]]:
+    """The wire blobs of each camera: its first ``keep`` blobs, all cameras quantised at once."""
+    if not cameras:
+        return []
+    cut = [
+        (b.uv[:k], b.area[:k], b.peak[:k], b.flags[:k]) for b, k in zip(cameras, keep, strict=True)
+    ]
+    blobs = cw.quantise_blobs(*(np.concatenate(col) for col in zip(*cut, strict=True)))
+    ends = np.cumsum(keep).tolist()
+    return [blobs[e - k : e] for e, k in zip(ends, keep, strict=True)]
 
 
 class CentroidDevice(Mcs1Device[CenConfig]):
@@ -242,6 +293,10 @@ class CentroidDevice(Mcs1Device[CenConfig]):
         self.ghost_pairs = rng.random((n_cams, markers)) < self.model.ghost_rate
         self._blob_rng = np.random.default_rng(np.random.SeedSequence([seed, 0xB10B]))
         self._on_capsule = carried_by(40)
+        #: The rig's cameras stacked once (every frame renders through them).
+        self._optics = Optics.of(self.rig.cameras)
+        self._on = np.zeros((markers, self._on_capsule.shape[1]), dtype=bool)
+        self._on[:40] = self._on_capsule[: min(markers, 40)]
         super().__init__(
             clock, faults, serial=serial, seed=seed, fault_log=fault_log,
             default_rate_hz=default_rate_hz, fifo_bytes=FIFO_BYTES, now_ns=now_ns, lab=lab,
@@ -280,10 +335,15 @@ class CentroidDevice(Mcs1Device[CenConfig]):
         m = X.shape[0]
         if not self.occlusion or m < 40 or self.motion is not None:
             return np.zeros((len(cameras), m), dtype=bool)
-        on = np.zeros((m, self._on_capsule.shape[1]), dtype=bool)
-        on[:40] = self._on_capsule
-        centers = np.stack([self.rig.cameras[c].center for c in cameras])
+        on = self._on if m == self._on.shape[0] else carried_by(m)
+        centers = self._cameras_optics(cameras).centers
         return sight_blocked(centers, X, *segment_capsules(X[:40]), on)
+
+    def _cameras_optics(self, cameras: list[int]) -> Optics:
+        """The stacked optics of these cameras of the rig."""
+        if cameras == list(range(len(self.rig.cameras))):
+            return self._optics
+        return self._optics.select(cameras)
 
     def render(
         self, camera: int, X: F64, sun_blobs: int = 0, hidden: npt.NDArray[np.bool_] | None = None
@@ -301,6 +361,7 @@ class CentroidDevice(Mcs1Device[CenConfig]):
         return render_cameras(
             [self.rig.cameras[c] for c in cameras], X, self.model, self._blob_rng,
             hidden=hidden, ghosts=self.ghost_pairs[cameras], sun_blobs=sun_blobs,
+            optics=self._cameras_optics(cameras),
         )  # fmt: skip
 
     # -- life cycle ----------------------------------------------------------------

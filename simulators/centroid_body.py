@@ -204,9 +204,13 @@ def segment_capsules(markers: F64) -> tuple[F64, F64, F64]:
     radius : ndarray, shape (K,)
         Radii (mm).
     """
-    ia = np.array([_G[a] for a, _, _ in SEGMENTS])
-    ib = np.array([_G[b] for _, b, _ in SEGMENTS])
-    return markers[ia], markers[ib], np.array([r for _, _, r in SEGMENTS])
+    return markers[_SEG_A], markers[_SEG_B], _SEG_RADIUS
+
+
+_SEG_A = np.array([_G[a] for a, _, _ in SEGMENTS])
+_SEG_B = np.array([_G[b] for _, b, _ in SEGMENTS])
+_SEG_RADIUS = np.array([r for _, _, r in SEGMENTS])
+_SEG_RADIUS.flags.writeable = False
 
 
 def carried_by(n_markers: int) -> npt.NDArray[np.bool_]:

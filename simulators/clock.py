@@ -96,11 +96,15 @@ class DeviceClock:
     # -- oscillator -> counter ----------------------------------------------
     def steps_before(self, osc_s: float) -> float:
         """Sum of the counter steps due at or before oscillator time ``osc_s``, seconds."""
+        if not self.steps:
+            return 0.0
         i = int(np.searchsorted(self._step_osc, osc_s, side="right"))
         return float(self._step_sum[i - 1]) if i else 0.0
 
     def step_count(self, osc_s: float) -> int:
         """How many counter steps are due at or before oscillator time ``osc_s``."""
+        if not self.steps:
+            return 0
         return int(np.searchsorted(self._step_osc, osc_s, side="right"))
 
     def device_us_at_osc(self, osc_s: float) -> float:
