@@ -129,12 +129,9 @@ class RigGeometry:
         """
         C = len(self)
         slot, width = camera_slots(camera, C) if slots is None else slots
-        padded = np.full((C, width, 2), np.nan)
-        padded[camera, slot] = uv
-        x, y, seen = self.triangulator.normalize(padded)
-        xy = np.stack([x[camera, slot], y[camera, slot]], axis=1)
-        ok = seen[camera, slot] & np.isfinite(xy).all(axis=1)
-        return xy, ok
+        xy = np.empty((camera.size, 2))
+        xy[:, 0], xy[:, 1] = self.triangulator.normalize_slots(uv, camera, slot, width)
+        return xy, np.asarray(np.isfinite(xy).all(axis=1))
 
     def project(self, X: FloatArray) -> FloatArray:
         """Normalised coordinates of world points in every camera.
