@@ -17,6 +17,7 @@ from spotlab.reconstruction.frame_triangulator import FrameTriangulator
 __all__ = ["RigGeometry", "camera_slots"]
 
 FloatArray = NDArray[np.float64]
+_LARGEST = float(np.finfo(np.float64).max)
 
 
 def _cross_matrix(v: FloatArray) -> FloatArray:
@@ -183,12 +184,15 @@ class RigGeometry:
         x, y = xy[..., 0], xy[..., 1]
         while True:
             X, ray_px, n_views = self.triangulator.solve(x, y, kept)
-            worst = np.where(kept, np.nan_to_num(ray_px, nan=np.inf), -1.0)
-            c = np.argmax(worst, axis=0)
-            k = np.flatnonzero(worst[c, np.arange(c.size)] > max_ray_px)
+            worst = np.where(kept, ray_px, -1.0)
+            # As np.nan_to_num(nan=inf) of the ray errors, without its overhead: an
+            # infinite error becomes the largest float, a NaN one (no point) infinite.
+            worst[worst == np.inf] = _LARGEST
+            worst[np.isnan(worst)] = np.inf
+            k = np.flatnonzero(worst.max(axis=0) > max_ray_px)
             if k.size == 0:
                 break
-            kept[c[k], k] = False
+            kept[np.argmax(worst[:, k], axis=0), k] = False
         n_views = kept.sum(axis=0)
         bad = (n_views < min_views) | np.isnan(X[:, 0])
         X[bad] = np.nan

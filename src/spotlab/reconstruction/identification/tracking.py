@@ -93,6 +93,8 @@ class Tracks:
 
     def keep(self, mask: NDArray[np.bool_]) -> None:
         """Delete the tracks where ``mask`` is False."""
+        if mask.all():  # the usual frame: nothing to delete, no copies
+            return
         for name in (
             "position",
             "velocity",
