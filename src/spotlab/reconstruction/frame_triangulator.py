@@ -244,6 +244,8 @@ class FrameTriangulator:
         width = -(-max(width, 1) // 16) * 16
         stack = self._wide.get(width)
         if stack is None:
+            if len(self._wide) >= 8:  # a few widths in use; a flooded camera's are not kept
+                self._wide.clear()
             stack = self._wide[width] = self._stack.widened(width)
         u = np.array(stack.cx)  # empty places at the principal point, as in normalize
         v = np.array(stack.cy)
