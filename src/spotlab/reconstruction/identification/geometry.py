@@ -41,10 +41,13 @@ def camera_slots(camera: NDArray[np.intp], n_cameras: int) -> tuple[NDArray[np.i
     """
     n = camera.size
     counts = np.bincount(camera, minlength=n_cameras)
-    order = np.argsort(camera, kind="stable")
-    slot = np.empty(n, dtype=np.intp)
     starts = np.cumsum(counts) - counts
-    slot[order] = np.arange(n) - np.repeat(starts, counts)
+    if n and (camera[1:] >= camera[:-1]).all():  # the usual order: camera by camera
+        slot = np.arange(n) - np.repeat(starts, counts)
+    else:
+        order = np.argsort(camera, kind="stable")
+        slot = np.empty(n, dtype=np.intp)
+        slot[order] = np.arange(n) - np.repeat(starts, counts)
     return slot, max(1, int(counts.max()) if n else 1)
 
 
