@@ -82,6 +82,8 @@ class RigGeometry:
         self.t = np.stack([cam.t for cam in rig])
         self.f = np.array([np.sqrt(cam.K[0, 0] * cam.K[1, 1]) for cam in rig])
         self.centers = np.stack([cam.center for cam in rig])
+        # columns of R as (C, 1, 3) arrays (project)
+        self._columns = tuple(np.ascontiguousarray(self.R[:, None, :, j]) for j in range(3))
         C = len(rig)
         self.E = np.zeros((C, C, 3, 3))
         for i in range(C):
@@ -150,7 +152,12 @@ class RigGeometry:
         ndarray, shape (C, N, 2)
             NaN behind a camera or for NaN points.
         """
-        Xc = np.einsum("cij,nj->cni", self.R, X)
+        # R X summed as (R0 x0 + R2 x2) + R1 x1, the order np.einsum("cij,nj->cni")
+        # takes, by broadcasting over the columns of R: about a third faster.
+        r0, r1, r2 = self._columns
+        Xc = r0 * X[:, 0, None]
+        Xc += r2 * X[:, 2, None]
+        Xc += r1 * X[:, 1, None]
         Xc += self.t[:, None, :]
         z = Xc[..., 2:3]
         with np.errstate(divide="ignore", invalid="ignore"):
