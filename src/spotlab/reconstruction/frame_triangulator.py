@@ -12,6 +12,7 @@ estimator is the depth-weighted ODLE of :func:`triangulate` (one re-weighting pa
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,23 @@ class _LensStack(_rays.Lens):
         self.g = coefs("g", 0)  # type: ignore[assignment]
         self.a = coefs("a", 1)  # type: ignore[assignment]
         self.h = coefs("h", 2)  # type: ignore[assignment]
+
+    def widened(self, width: int) -> _LensStack:
+        """This stack with every column repeated to shape (C, width): elementwise the
+        same arithmetic on (C, width) tables, without the cost of broadcasting (about
+        three times that of an operation on equal shapes for a frame's few blobs)."""
+        wide = copy.copy(self)
+
+        def rep(col: Any) -> Any:  # a (C, 1) column as a (C, width) table
+            return np.repeat(col, width, axis=1)
+
+        wide.cx, wide.cy = rep(self.cx), rep(self.cy)
+        wide.fx_inv, wide.fy_inv = rep(self.fx_inv), rep(self.fy_inv)
+        wide.k = tuple(rep(c) for c in self.k)
+        wide.g = [rep(c) for c in self.g]
+        wide.a = [rep(c) for c in self.a]
+        wide.h = [rep(c) for c in self.h]
+        return wide
 
     def _finish(
         self,
@@ -109,6 +127,7 @@ class FrameTriangulator:
         self._stack = _LensStack(self._frame.lenses)
         self._R = np.stack([cam.R for cam in rig])
         self._f = np.sqrt(self._frame.f2)  # (C, 1) px
+        self._wide: dict[int, _LensStack] = {}  # widened lens stacks by table width
 
     def __call__(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
         """Points of one frame.
@@ -189,6 +208,51 @@ class FrameTriangulator:
             x[unseen] = 0.0
             y[unseen] = 0.0
         return x, y, seen
+
+    def normalize_slots(
+        self, uv: FloatArray, camera: NDArray[np.intp], slot: NDArray[np.intp], width: int
+    ) -> tuple[FloatArray, FloatArray]:
+        """Ideal normalised coordinates of blobs stacked camera by camera.
+
+        The same values as :meth:`normalize` of the (C, width) table holding blob ``i``
+        at ``[camera[i], slot[i]]``, computed on a table of a width rounded up to a
+        multiple of 16 whose lens columns are built once per width.
+
+        Parameters
+        ----------
+        uv : ndarray, shape (N, 2)
+            Distorted pixels (finite).
+        camera, slot : ndarray of int, shape (N,)
+            Table places, ``slot < width``.
+        width : int
+
+        Returns
+        -------
+        x, y : ndarray, shape (N,)
+
+        Raises
+        ------
+        ReconstructionError
+            For pixels where the distortion has no inverse.
+        """
+        C = len(self.rig)
+        if self._skewed:
+            table = np.full((C, width, 2), np.nan)
+            table[camera, slot] = uv
+            x, y, _ = self.normalize(table)
+            return x[camera, slot], y[camera, slot]
+        width = -(-max(width, 1) // 16) * 16
+        stack = self._wide.get(width)
+        if stack is None:
+            if len(self._wide) >= 8:  # a few widths in use; a flooded camera's are not kept
+                self._wide.clear()
+            stack = self._wide[width] = self._stack.widened(width)
+        u = np.array(stack.cx)  # empty places at the principal point, as in normalize
+        v = np.array(stack.cy)
+        u[camera, slot] = uv[:, 0]
+        v[camera, slot] = uv[:, 1]
+        x, y = stack.normalize(u, v)
+        return x[camera, slot], y[camera, slot]
 
     def solve(
         self, x: FloatArray, y: FloatArray, seen: NDArray[np.bool_]

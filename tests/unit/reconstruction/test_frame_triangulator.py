@@ -61,6 +61,29 @@ def test_skewed_and_undistorted_cameras_take_the_same_result() -> None:
     np.testing.assert_allclose(FrameTriangulator(plain)(uv[1:])[0], X, atol=1e-6)
 
 
+def test_stacked_blobs_normalise_as_the_padded_table() -> None:
+    rig, _, uv = _scene(3)
+    cams = list(rig.cameras)
+    cams[1] = Camera(cams[1].K, np.zeros(5), cams[1].R, cams[1].t, cams[1].size, "pinhole")
+    uv[:, :, 0] += np.linspace(-500.0, 500.0, 128)  # some far out: more Newton steps
+    rng = np.random.default_rng(3)
+    for rig_ in (rig, Rig(cams)):
+        tri = FrameTriangulator(rig_)
+        for n in (0, 1, 37, 300):
+            camera = np.sort(rng.integers(0, 8, n))
+            slot = np.zeros(n, dtype=np.intp)
+            for c in range(8):
+                slot[camera == c] = np.arange(np.sum(camera == c))
+            width = max(1, int(slot.max()) + 1 if n else 1)
+            pixels = uv.reshape(-1, 2)[rng.integers(0, 8 * 128, n)]
+            table = np.full((8, width, 2), np.nan)
+            table[camera, slot] = pixels
+            x, y, _ = tri.normalize(table)
+            got_x, got_y = tri.normalize_slots(pixels, camera, slot, width)
+            np.testing.assert_array_equal(got_x, x[camera, slot])  # to the last bit
+            np.testing.assert_array_equal(got_y, y[camera, slot])
+
+
 def test_bad_input_is_refused() -> None:
     rig, _, uv = _scene()
     tri = FrameTriangulator(rig)

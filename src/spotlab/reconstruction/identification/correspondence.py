@@ -158,7 +158,7 @@ def match_blobs(
         raise ReconstructionError(f"xy must have shape ({cam.size}, 2), got {xy.shape}")
     C = len(geom)
     empty = Correspondence(np.zeros((0, 3)), np.zeros((C, 0), np.intp), np.zeros((C, 0)))
-    if np.unique(cam).size < min_cameras:
+    if np.count_nonzero(np.bincount(cam, minlength=C)) < min_cameras:  # cameras with blobs
         return empty
     a, b, dist = _epipolar_pairs(geom, xy, cam, gate_px)
     if a.size == 0:

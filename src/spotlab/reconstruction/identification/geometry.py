@@ -17,6 +17,7 @@ from spotlab.reconstruction.frame_triangulator import FrameTriangulator
 __all__ = ["RigGeometry", "camera_slots"]
 
 FloatArray = NDArray[np.float64]
+_LARGEST = float(np.finfo(np.float64).max)
 
 
 def _cross_matrix(v: FloatArray) -> FloatArray:
@@ -40,10 +41,13 @@ def camera_slots(camera: NDArray[np.intp], n_cameras: int) -> tuple[NDArray[np.i
     """
     n = camera.size
     counts = np.bincount(camera, minlength=n_cameras)
-    order = np.argsort(camera, kind="stable")
-    slot = np.empty(n, dtype=np.intp)
     starts = np.cumsum(counts) - counts
-    slot[order] = np.arange(n) - np.repeat(starts, counts)
+    if n and (camera[1:] >= camera[:-1]).all():  # the usual order: camera by camera
+        slot = np.arange(n) - np.repeat(starts, counts)
+    else:
+        order = np.argsort(camera, kind="stable")
+        slot = np.empty(n, dtype=np.intp)
+        slot[order] = np.arange(n) - np.repeat(starts, counts)
     return slot, max(1, int(counts.max()) if n else 1)
 
 
@@ -78,6 +82,8 @@ class RigGeometry:
         self.t = np.stack([cam.t for cam in rig])
         self.f = np.array([np.sqrt(cam.K[0, 0] * cam.K[1, 1]) for cam in rig])
         self.centers = np.stack([cam.center for cam in rig])
+        # columns of R as (C, 1, 3) arrays (project)
+        self._columns = tuple(np.ascontiguousarray(self.R[:, None, :, j]) for j in range(3))
         C = len(rig)
         self.E = np.zeros((C, C, 3, 3))
         for i in range(C):
@@ -129,12 +135,9 @@ class RigGeometry:
         """
         C = len(self)
         slot, width = camera_slots(camera, C) if slots is None else slots
-        padded = np.full((C, width, 2), np.nan)
-        padded[camera, slot] = uv
-        x, y, seen = self.triangulator.normalize(padded)
-        xy = np.stack([x[camera, slot], y[camera, slot]], axis=1)
-        ok = seen[camera, slot] & np.isfinite(xy).all(axis=1)
-        return xy, ok
+        xy = np.empty((camera.size, 2))
+        xy[:, 0], xy[:, 1] = self.triangulator.normalize_slots(uv, camera, slot, width)
+        return xy, np.asarray(np.isfinite(xy).all(axis=1))
 
     def project(self, X: FloatArray) -> FloatArray:
         """Normalised coordinates of world points in every camera.
@@ -149,7 +152,12 @@ class RigGeometry:
         ndarray, shape (C, N, 2)
             NaN behind a camera or for NaN points.
         """
-        Xc = np.einsum("cij,nj->cni", self.R, X)
+        # R X summed as (R0 x0 + R2 x2) + R1 x1, the order np.einsum("cij,nj->cni")
+        # takes, by broadcasting over the columns of R: about a third faster.
+        r0, r1, r2 = self._columns
+        Xc = r0 * X[:, 0, None]
+        Xc += r2 * X[:, 2, None]
+        Xc += r1 * X[:, 1, None]
         Xc += self.t[:, None, :]
         z = Xc[..., 2:3]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -186,12 +194,15 @@ class RigGeometry:
         x, y = xy[..., 0], xy[..., 1]
         while True:
             X, ray_px, n_views = self.triangulator.solve(x, y, kept)
-            worst = np.where(kept, np.nan_to_num(ray_px, nan=np.inf), -1.0)
-            c = np.argmax(worst, axis=0)
-            k = np.flatnonzero(worst[c, np.arange(c.size)] > max_ray_px)
+            worst = np.where(kept, ray_px, -1.0)
+            # As np.nan_to_num(nan=inf) of the ray errors, without its overhead: an
+            # infinite error becomes the largest float, a NaN one (no point) infinite.
+            worst[worst == np.inf] = _LARGEST
+            worst[np.isnan(worst)] = np.inf
+            k = np.flatnonzero(worst.max(axis=0) > max_ray_px)
             if k.size == 0:
                 break
-            kept[c[k], k] = False
+            kept[np.argmax(worst[:, k], axis=0), k] = False
         n_views = kept.sum(axis=0)
         bad = (n_views < min_views) | np.isnan(X[:, 0])
         X[bad] = np.nan

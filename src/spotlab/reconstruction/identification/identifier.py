@@ -148,7 +148,7 @@ class Identifier:
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
         _ = model.partners, model.directed  # the model's lookup tables, built before frames
-        self._points = np.full((len(model.labels), 3), np.nan)  # handedness check buffer
+        self._points = np.full((len(model.labels), 3), np.nan)  # labelled points (checks)
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -183,11 +183,13 @@ class Identifier:
         flags |= np.where(counts == 0, NO_BLOBS, 0)
         if unusable is not None:
             flags |= np.where(np.asarray(unusable, dtype=bool).reshape(C), UNUSABLE, 0)
-        keep = (flags & (FLOODED | UNUSABLE))[frame.camera] == 0
-        camera = frame.camera[keep]
+        camera, uv, merged = frame.camera, frame.uv, frame.merged
+        if (flags & (FLOODED | UNUSABLE)).any():
+            keep = (flags & (FLOODED | UNUSABLE))[camera] == 0
+            camera, uv, merged = camera[keep], uv[keep], merged[keep]
         slots = camera_slots(camera, C)
-        xy, ok = self.geom.normalize(frame.uv[keep], camera, slots)
-        usable = ok & ~frame.merged[keep]
+        xy, ok = self.geom.normalize(uv, camera, slots)
+        usable = ok & ~merged
         tracks = self.tracks
         gate = np.asarray(self.gate_px * (1.0 + tracks.missed), dtype=np.float64)
         index, near = associate(self.geom, tracks.predict(), gate, xy, camera, usable, slots)
@@ -293,12 +295,14 @@ class Identifier:
         M = len(self.model.labels)
         seen = tracks.missed == 0
         labelled = np.flatnonzero((tracks.label >= 0) & seen)
-        points = np.full((M, 3), np.nan)
+        points = self._points
+        points.fill(np.nan)
         points[tracks.label[labelled]] = tracks.position[labelled]
         age = np.zeros(M, dtype=np.intp)
         age[tracks.label[labelled]] = tracks.age[labelled]
         drop = inconsistent_labels(self.model, points, age, self.tol_mm)
-        if drop.any():
+        changed = bool(drop.any())  # labels other than those of ``points``
+        if changed:
             bad = np.isin(tracks.label, np.flatnonzero(drop)) & seen
             tracks.label[bad] = -1
             tracks.age[bad] = 0
@@ -323,18 +327,21 @@ class Identifier:
                 tracks.label[new] = taken
                 tracks.age[new] = 0
                 tracks.label[stale] = -1
+                changed = True
         if self.model.sides[0].size:
-            self._check_handedness()
+            self._check_handedness(refill=changed)
         self._update_anchors()
 
-    def _check_handedness(self) -> None:
+    def _check_handedness(self, refill: bool) -> None:
         """Drop the labels of flat clusters whose references say they are the wrong way
-        round (a wrong identity passes every distance check): found again next frame."""
+        round (a wrong identity passes every distance check): found again next frame.
+        ``refill``: labels changed since :meth:`_label` filled the points buffer."""
         tracks = self.tracks
-        lab = (tracks.label >= 0) & (tracks.missed == 0)
         points = self._points
-        points.fill(np.nan)
-        points[tracks.label[lab]] = tracks.position[lab]
+        if refill:
+            lab = (tracks.label >= 0) & (tracks.missed == 0)
+            points.fill(np.nan)
+            points[tracks.label[lab]] = tracks.position[lab]
         drop = misplaced_segments(self.model.segment_arrays, self.model.sides, points)
         if drop.any():
             bad = np.isin(tracks.label, np.flatnonzero(drop)) & (tracks.missed == 0)
@@ -408,5 +415,7 @@ class Identifier:
 def _rms(ray_px: FloatArray) -> FloatArray:
     """RMS over the cameras (axis 0) of ray errors (C, K), NaN where none."""
     n = np.isfinite(ray_px).sum(axis=0)
+    square = ray_px**2
+    square[np.isnan(square)] = 0.0  # as np.nansum, without its overhead
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.asarray(np.sqrt(np.nansum(ray_px**2, axis=0) / n))
+        return np.asarray(np.sqrt(square.sum(axis=0) / n))

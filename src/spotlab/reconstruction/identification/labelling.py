@@ -71,8 +71,9 @@ def inconsistent_labels(
     both = np.isfinite(err)
     bad = both & (err > tol_mm)
     M = points.shape[0]
-    checked = np.bincount(i[both], minlength=M) + np.bincount(j[both], minlength=M)
-    wrong = np.bincount(i[bad], minlength=M) + np.bincount(j[bad], minlength=M)
+    # counts as float sums of 0 / 1 weights: exact, and no masked copies of i and j
+    checked = np.bincount(i, both, M) + np.bincount(j, both, M)
+    wrong = np.bincount(i, bad, M) + np.bincount(j, bad, M)
     drop = (checked >= 2) & (2 * wrong > checked)
     lone = np.flatnonzero(bad & ((checked[i] == 1) | (checked[j] == 1)))
     drop[i[lone]] = True  # one distance cannot say which of the two is wrong

@@ -93,6 +93,8 @@ class Tracks:
 
     def keep(self, mask: NDArray[np.bool_]) -> None:
         """Delete the tracks where ``mask`` is False."""
+        if mask.all():  # the usual frame: nothing to delete, no copies
+            return
         for name in (
             "position",
             "velocity",
@@ -152,28 +154,44 @@ def associate(
     table_y[camera, slot] = xy[:, 1]
     blob = np.full((C, width), -1, dtype=np.intp)
     blob[camera, slot] = np.arange(camera.size)
+    # A rough test on the squared x distances alone (normalised, a 1e-6 margin over the
+    # gate) picks the few (camera, track, blob) candidates; their exact pixel distances
+    # are then computed with the same operations as a full table would take.
     dx = proj[:, :, 0, None] - table_x[:, None, :]  # (C, K, W)
-    dy = proj[:, :, 1, None] - table_y[:, None, :]
     dx *= dx
+    limit = gate_px[None, :] / geom.f[:, None]
+    limit *= limit
+    limit *= 1.0 + 1e-6
+    flat = np.flatnonzero(dx < limit[:, :, None])  # NaN (padding, behind) never inside
+    c_n, rest = np.divmod(flat, K * width)
+    k_n, w_n = np.divmod(rest, width)
+    dy = proj[c_n, k_n, 1] - table_y[c_n, w_n]
     dy *= dy
-    dx += dy
-    d = np.sqrt(dx, out=dx)
-    d *= geom.f[:, None, None]
-    with np.errstate(invalid="ignore"):
-        inside = d < gate_px[None, :, None]  # NaN (padding, behind a camera) never inside
-    hit = inside.any(axis=1)  # (C, W)
-    near[blob[hit]] = True
+    dy += dx.ravel()[flat]
+    d_n = np.sqrt(dy, out=dy)
+    d_n *= geom.f[c_n]
+    exact = d_n < gate_px[k_n]
+    c_n, k_n, w_n, d_n = c_n[exact], k_n[exact], w_n[exact], d_n[exact]
+    near[blob[c_n, w_n]] = True  # within the gate of some projection: explained
     free = np.zeros((C, width), dtype=bool)
     free[camera, slot] = usable
-    inside &= free[:, None, :]
-    per_track = inside.sum(axis=2)  # (C, K)
-    per_blob = inside.sum(axis=1)  # (C, W)
+    take = free[c_n, w_n]
+    c_n, k_n, w_n, d_n = c_n[take], k_n[take], w_n[take], d_n[take]
+    per_track = np.bincount(c_n * K + k_n, minlength=C * K).reshape(C, K)
+    per_blob = np.bincount(c_n * width + w_n, minlength=C * width).reshape(C, width)
     # one blob for one track and that blob for no other: taken as it is
-    single = (per_track == 1) & (per_blob[np.arange(C)[:, None], np.argmax(inside, axis=2)] == 1)
-    c_s, k_s = np.nonzero(single)
-    index[c_s, k_s] = blob[c_s, np.argmax(inside[c_s, k_s], axis=1)]
+    single_n = (per_track[c_n, k_n] == 1) & (per_blob[c_n, w_n] == 1)
+    index[c_n[single_n], k_n[single_n]] = blob[c_n[single_n], w_n[single_n]]
+    single = np.zeros((C, K), dtype=bool)
+    single[c_n[single_n], k_n[single_n]] = True
     # the rest, where tracks compete for blobs: Hungarian per camera
     contested = (per_track > 0) & ~single
+    if not contested.any():
+        return index, near
+    inside = np.zeros((C, K, width), dtype=bool)
+    inside[c_n, k_n, w_n] = True
+    d = np.empty((C, K, width))
+    d[c_n, k_n, w_n] = d_n
     for c in np.flatnonzero(contested.any(axis=1)):
         rows = np.flatnonzero(contested[c])
         in_rows = inside[c, rows]
