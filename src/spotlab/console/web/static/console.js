@@ -157,6 +157,46 @@ function project(p, c) {
   return [c.width / 2 + xr * f, c.height / 2 - up * f];
 }
 
+// The floor, the axes and the cameras change only with the view or the rig: drawn once
+// into an offscreen canvas and copied under each new frame of markers.
+const backdrop = { canvas: null, key: "" };
+function drawBackdrop(c, cameras) {
+  const key = [c.width, c.height, view.az, view.el, view.dist, view.half,
+    JSON.stringify(cameras || [])].join("|");
+  if (backdrop.key === key) return backdrop.canvas;
+  const b = backdrop.canvas || document.createElement("canvas");
+  b.width = c.width; b.height = c.height;
+  const g = b.getContext("2d");
+  g.fillStyle = "#10161d";
+  g.fillRect(0, 0, b.width, b.height);
+  g.strokeStyle = "#35506b";
+  g.lineWidth = 1;
+  g.beginPath();
+  for (let k = -view.half; k <= view.half; k += 500) {  // the floor, z = 0, every 0.5 m
+    for (const [a, e] of [[[k, -view.half, 0], [k, view.half, 0]], [[-view.half, k, 0], [view.half, k, 0]]]) {
+      const [x0, y0] = project(a, b), [x1, y1] = project(e, b);
+      g.moveTo(x0, y0); g.lineTo(x1, y1);
+    }
+  }
+  g.stroke();
+  for (const [axis, colour] of [[[500, 0, 0], "#e57373"], [[0, 500, 0], "#81c784"], [[0, 0, 500], "#64b5f6"]]) {
+    const [x0, y0] = project([0, 0, 0], b), [x1, y1] = project(axis, b);
+    g.strokeStyle = colour; g.beginPath(); g.moveTo(x0, y0); g.lineTo(x1, y1); g.stroke();
+  }
+  g.font = "10px sans-serif";
+  for (const cam of cameras || []) {  // the rig's cameras: centre and optical axis
+    const [x, y] = project(cam.center, b);
+    const tip = cam.center.map((v, k) => v + 400 * cam.axis[k]);
+    const [tx, ty] = project(tip, b);
+    g.strokeStyle = "#ffb74d"; g.beginPath(); g.moveTo(x, y); g.lineTo(tx, ty); g.stroke();
+    g.fillStyle = "#ffb74d"; g.fillRect(x - 4, y - 4, 8, 8);
+    g.fillText(cam.name, x + 6, y + 10);
+  }
+  backdrop.canvas = b;
+  backdrop.key = key;
+  return b;
+}
+
 function show3d(markers, cameras) {
   for (const cam of cameras || []) {  // the floor and view reach the cameras
     const reach = Math.max(Math.abs(cam.center[0]), Math.abs(cam.center[1])) + 500;
@@ -164,41 +204,23 @@ function show3d(markers, cameras) {
   }
   const c = document.getElementById("view3d");
   const g = c.getContext("2d");
-  g.fillStyle = "#10161d";
-  g.fillRect(0, 0, c.width, c.height);
-  g.strokeStyle = "#35506b";
-  g.lineWidth = 1;
-  for (let k = -view.half; k <= view.half; k += 500) {  // the floor, z = 0, every 0.5 m
-    for (const [a, b] of [[[k, -view.half, 0], [k, view.half, 0]], [[-view.half, k, 0], [view.half, k, 0]]]) {
-      const [x0, y0] = project(a, c), [x1, y1] = project(b, c);
-      g.beginPath(); g.moveTo(x0, y0); g.lineTo(x1, y1); g.stroke();
-    }
-  }
-  for (const [axis, colour] of [[[500, 0, 0], "#e57373"], [[0, 500, 0], "#81c784"], [[0, 0, 500], "#64b5f6"]]) {
-    const [x0, y0] = project([0, 0, 0], c), [x1, y1] = project(axis, c);
-    g.strokeStyle = colour; g.beginPath(); g.moveTo(x0, y0); g.lineTo(x1, y1); g.stroke();
-  }
-  g.font = "10px sans-serif";
-  for (const cam of cameras || []) {  // the rig's cameras: centre and optical axis
-    const [x, y] = project(cam.center, c);
-    const tip = cam.center.map((v, k) => v + 400 * cam.axis[k]);
-    const [tx, ty] = project(tip, c);
-    g.strokeStyle = "#ffb74d"; g.beginPath(); g.moveTo(x, y); g.lineTo(tx, ty); g.stroke();
-    g.fillStyle = "#ffb74d"; g.fillRect(x - 4, y - 4, 8, 8);
-    g.fillText(cam.name, x + 6, y + 10);
-  }
+  g.drawImage(drawBackdrop(c, cameras), 0, 0);
   if (!markers) return;
   if (markers.seq !== view.drawnSeq) { view.drawnSeq = markers.seq; received.frames3d += 1; }
-  markers.points.forEach((p, i) => {
-    if (!p) return;
-    const [x, y] = project(p, c);
-    const [fx, fy] = project([p[0], p[1], 0], c);
-    g.strokeStyle = "#ffffff22"; g.beginPath(); g.moveTo(fx, fy); g.lineTo(x, y); g.stroke();
-    g.fillStyle = "#4dd0e1";
-    g.beginPath(); g.arc(x, y, 4, 0, 2 * Math.PI); g.fill();
-    g.fillStyle = "#cfd8dc";
-    g.fillText(markers.labels[i] || "", x + 6, y - 4);
-  });
+  // one path for the stems to the floor, one for the dots, then the labels
+  const shown = [];
+  markers.points.forEach((p, i) => { if (p) shown.push([project(p, c), project([p[0], p[1], 0], c), i]); });
+  g.strokeStyle = "#ffffff22"; g.lineWidth = 1;
+  g.beginPath();
+  for (const [[x, y], [fx, fy]] of shown) { g.moveTo(fx, fy); g.lineTo(x, y); }
+  g.stroke();
+  g.fillStyle = "#4dd0e1";
+  g.beginPath();
+  for (const [[x, y]] of shown) { g.moveTo(x + 4, y); g.arc(x, y, 4, 0, 2 * Math.PI); }
+  g.fill();
+  g.fillStyle = "#cfd8dc";
+  g.font = "10px sans-serif";
+  for (const [[x, y], , i] of shown) g.fillText(markers.labels[i] || "", x + 6, y - 4);
 }
 
 // ---- recording and trials ------------------------------------------------------------
