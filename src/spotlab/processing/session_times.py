@@ -53,7 +53,8 @@ class DecodedStreams:
 
 
 def decode_streams(path: str | os.PathLike[str]) -> DecodedStreams:
-    """Decode every block of every stream of a recording (damaged blocks skipped).
+    """Decode every block of every stream of a recording (damaged blocks skipped), the
+    streams in the journal's order (the order the devices were given).
 
     Raises
     ------
@@ -62,13 +63,18 @@ def decode_streams(path: str | os.PathLike[str]) -> DecodedStreams:
     """
     blocks: dict[str, list[FrameBlock]] = {}
     meta: dict[str, dict[str, object]] = {}
+    index: dict[str, int] = {}
     for kind, state, block in Walk(Path(path), decoder_for, strict=False).steps():
         if kind == "block" and block is not None:
             blocks.setdefault(state.name, []).append(block)
             meta[state.name] = state.metadata
+            index[state.name] = state.index
     if not blocks:
         raise InputError(f"{path}: the recording holds no decoded frames")
-    return DecodedStreams(blocks, meta)
+    # In the journal's stream order (the order the devices were given), not the order
+    # their first frames came in: a rig's cameras follow the former.
+    order = sorted(blocks, key=index.__getitem__)
+    return DecodedStreams({n: blocks[n] for n in order}, {n: meta[n] for n in order})
 
 
 def read_streams(
