@@ -30,8 +30,8 @@ the hub's simulator fell behind 300 Hz (a loaded machine starves it: it needs ab
 third of a core at 300 Hz), so the run is not conclusive; the simulators' serving
 threads ask for nice -10 (``SPOTLAB_SIM_NICE``, unless set) to keep them in time.
 
-``--realtime PRIO`` runs both the same way as ``spotlab console --realtime PRIO``: every
-thread of the acquiring process under ``SCHED_FIFO`` (needs root or CAP_SYS_NICE).
+``--realtime PRIO`` runs both the same way as ``spotlab console --realtime PRIO``: the
+sessions' threads and the main thread under ``SCHED_FIFO`` (needs root or CAP_SYS_NICE).
 
 Usage: ``python benchmarks/console_load.py [--seconds 10] [--rounds 2] [--realtime 10]``.
 A shared 2-core machine is noisy: the rounds alternate the two runs so that both see the same load.
@@ -170,7 +170,7 @@ def _headless(lab: Path, data: Path, seconds: float, realtime: int | None) -> in
     from spotlab.console.web.lab_setup import plan_lab
     from spotlab.console.web.trials import TrialInfo, TrialStore
 
-    if realtime is not None:  # as spotlab console --realtime: the whole process
+    if realtime is not None:  # as spotlab console --realtime: the main thread too
         from spotlab.acquisition.realtime import raise_thread
 
         raise_thread(realtime)

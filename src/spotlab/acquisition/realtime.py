@@ -11,15 +11,17 @@ sessions first), so the tail of the live latency then follows the machine's load
 for as long as they do not block. A session's threads block almost all the time (in
 ``recv`` or on their queue), so raising them costs the rest of the machine only the
 work they do. The policy is asked per thread, by the thread itself, with
-``SCHED_RESET_ON_FORK`` so that no process it starts inherits it. It needs root or
+``SCHED_RESET_ON_FORK``: no process or thread it starts inherits it (Linux resets every
+new task, threads included). It needs root or
 ``CAP_SYS_NICE`` (or an ``RLIMIT_RTPRIO`` of at least the priority, e.g. the
 ``rtprio`` line of ``/etc/security/limits.conf``); where the system refuses, the thread
 goes on at the normal policy and the refusal is reported once.
 
 Python's interpreter lock is held by one thread at a time: a normal thread of the same
 process holding it while other programs preempt it delays the raised ones (priority
-inversion). :func:`raise_thread` is therefore also offered to whoever starts a session
-from a thread of its own (the console's acquisition thread does).
+inversion). :func:`raise_thread` is therefore also offered for a program's own busy
+threads beside a session (``spotlab console --realtime`` raises its main thread, where
+the web server runs).
 """
 
 from __future__ import annotations

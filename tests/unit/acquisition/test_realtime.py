@@ -118,3 +118,24 @@ def test_the_probe_runs_in_a_thread_of_its_own() -> None:
     probe(2)
     names = [t.name for t in threading.enumerate()]
     assert "spotlab-rt-probe" not in names and threading.active_count() == before
+
+
+def test_a_thread_started_from_a_raised_one_runs_at_the_normal_policy() -> None:
+    """SCHED_RESET_ON_FORK resets every new task, threads too: a session raises each of
+    its threads itself, and heavy work started from a raised thread is not raised."""
+    if not _allowed():
+        assert raise_thread(4) is not None
+        return
+    seen: list[tuple[str, int]] = []
+
+    def raised() -> None:
+        assert raise_thread(4) is None
+        seen.append(current_policy())
+        child = threading.Thread(target=lambda: seen.append(current_policy()))
+        child.start()
+        child.join()
+
+    parent = threading.Thread(target=raised)
+    parent.start()
+    parent.join()
+    assert seen == [("fifo", 4), ("other", 0)]

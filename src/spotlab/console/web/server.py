@@ -87,10 +87,11 @@ def serve(
     url = f"http://{shown}:{bound}/" + (f"?token={token}" if token else "")
     print(url, flush=True)
     if realtime is not None:
-        # Every thread of the console under SCHED_FIFO, the web server's too: a normal
-        # thread holding the interpreter lock while other programs (the page's browser)
-        # run would hold up the acquisition's. Threads started from here inherit the
-        # policy; a refusal is told by the sessions (Acquisition's note).
+        # This thread, where the web server runs, under SCHED_FIFO too: a normal thread
+        # holding the interpreter lock while other programs (the page's browser) run
+        # would hold up the sessions' raised threads. Threads started from here do not
+        # inherit it (SCHED_RESET_ON_FORK resets every new thread); the sessions raise
+        # their own, and tell a refusal (Acquisition's note).
         raise_thread(realtime)
     acq.start()
     app = make_app(acq, token)
