@@ -12,7 +12,10 @@ frames dropped by the device (flow control, docs/protocols/mcs1.md §4).
 The default configurations are the family's largest of the issue (8 cameras x 40
 markers at 300 Hz) and twice its data rate (the same at 600 Hz).
 
-Usage: ``python benchmarks/centroid_link.py [--seconds 20] [--configs 300 600] [--repeats 1]``
+The line runs at the driver's default rate (24 Mbaud) unless ``--baud`` says otherwise.
+
+Usage: ``python benchmarks/centroid_link.py [--seconds 20] [--configs 300 600] [--repeats 1]
+[--baud 12000000]``
 """
 
 from __future__ import annotations
@@ -44,7 +47,9 @@ def _proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[str, object]:
+def run_once(
+    rate: float, seconds: float, cameras: int, markers: int, baud: int | None = None
+) -> dict[str, object]:
     """One recording of a clean simulated hub; its live link statistics."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "sim.out"
@@ -65,7 +70,7 @@ def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[st
             rec = subprocess.run(
                 _spotlab("record", "--device", f"centroid={port}", "--cameras", cameras,
                          "--rate", rate, "--seconds", seconds, "--out", Path(tmp) / "run.spj",
-                         "--json"),
+                         "--json", *(["--baud", baud] if baud else [])),
                 capture_output=True, text=True, timeout=seconds + 60,
             )  # fmt: skip
             load1 = os.getloadavg()[0]
@@ -79,7 +84,8 @@ def run_once(rate: float, seconds: float, cameras: int, markers: int) -> dict[st
                 sim.kill()
                 sim.wait()
     row: dict[str, object] = {
-        "bench": "centroid_link", "cameras": cameras, "markers": markers, "rate_hz": rate,
+        "bench": "centroid_link", "baud": baud or "default", "cameras": cameras,
+        "markers": markers, "rate_hz": rate,
         "seconds": seconds, "exit": rec.returncode, "load_1min": [load0, load1],
         "cpu_s_per_s": {"simulator": round(sim_cpu / seconds, 3),
                         "record": round(rec_cpu / seconds, 3)},
@@ -102,10 +108,14 @@ def main() -> None:
     ap.add_argument("--cameras", type=int, default=8)
     ap.add_argument("--markers", type=int, default=40)
     ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--baud", type=int, default=None, help="line rate (default: the driver's)")
     args = ap.parse_args()
     for _ in range(args.repeats):
         for rate in args.configs:
-            print(json.dumps(run_once(rate, args.seconds, args.cameras, args.markers)), flush=True)
+            print(
+                json.dumps(run_once(rate, args.seconds, args.cameras, args.markers, args.baud)),
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

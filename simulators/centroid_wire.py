@@ -31,8 +31,8 @@ HUB_HEADER_BYTES = 20
 CAMERA_HEADER_BYTES = 20
 BLOB_BYTES = 8
 FRAME_OVERHEAD = 12
-#: ``COMM:<c>`` codes of the CEN hub: MCS-1's, and 10 (6 Mbaud), 11 (12 Mbaud).
-CEN_BAUD_RATES: dict[int, int] = {**BAUD_RATES, 10: 6_000_000, 11: 12_000_000}
+#: ``COMM:<c>`` codes of the CEN hub: MCS-1's, and 10 (6 Mbaud), 11 (12 Mbaud), 12 (24 Mbaud).
+CEN_BAUD_RATES: dict[int, int] = {**BAUD_RATES, 10: 6_000_000, 11: 12_000_000, 12: 24_000_000}
 
 # Camera record flags (centroid.md §4).
 CAM_OVERFLOW = 0x01

@@ -20,8 +20,12 @@ from spotlab.drivers.mcs1.load import LineLoad
 
 MAX_CAMERAS = 16
 MAX_BLOBS = 1024
-#: ``COMM`` codes of the CEN hub: MCS-1's and 10 (6 Mbaud), 11 (12 Mbaud).
-CEN_BAUD_CODES: dict[int, int] = {**BAUD_CODES, 6_000_000: 10, 12_000_000: 11}
+#: ``COMM`` codes of the CEN hub: MCS-1's and 10 (6 Mbaud), 11 (12 Mbaud), 12 (24 Mbaud).
+CEN_BAUD_CODES: dict[int, int] = {
+    **BAUD_CODES, 6_000_000: 10, 12_000_000: 11, 24_000_000: 12,
+}  # fmt: skip
+#: The line rate used unless another is asked for: the fastest (centroid.md §2).
+DEFAULT_BAUD = 24_000_000
 FRAME_FIXED = 32
 CAMERA_BYTES = 20
 BLOB_BYTES = 8
@@ -55,7 +59,7 @@ class CentroidConfig(LineLoad):
     exposure_us: int = 500
     threshold: int = 128
     max_blobs: int = 256
-    baud: int = 12_000_000
+    baud: int = DEFAULT_BAUD
 
     def __post_init__(self) -> None:
         checks = (
@@ -93,7 +97,7 @@ class CentroidConfig(LineLoad):
         exposure_us: int = 500,
         threshold: int = 128,
         max_blobs: int = 256,
-        baud: int | str = 12_000_000,
+        baud: int | str = DEFAULT_BAUD,
     ) -> CentroidConfig:
         """A checked configuration; ``cameras`` C enables cameras 0 .. C-1 (default 8).
 

@@ -1,6 +1,6 @@
 """The CEN video-centroid hub driver (centroid.md §6): MCS-1 state machine, hub set-up.
 
-:class:`CentroidDriver` resets, negotiates (CEN accepts 6 and 12 Mbaud too),
+:class:`CentroidDriver` resets, negotiates (CEN accepts 6, 12 and 24 Mbaud too),
 checks ``VER:0`` (``CEN``, enough cameras, blob cap, 1 MHz camera clocks), sends
 ``RATE``, ``CAMS``, ``EXPO``, ``THRS`` and ``BLOB`` and starts the stream;
 recovery is :class:`Mcs1Driver`'s.
@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 from spotlab.core.errors import ConfigurationError
 from spotlab.core.streams import StreamSpec
-from spotlab.drivers.centroid.config import CEN_BAUD_CODES, CentroidConfig
+from spotlab.drivers.centroid.config import CEN_BAUD_CODES, DEFAULT_BAUD, CentroidConfig
 from spotlab.drivers.centroid.protocol import (
     FAMILY_CODE,
     TICK_HZ,
@@ -49,7 +49,7 @@ class CentroidDriver(FamilyDriver[CentroidConfig, CentroidDecoder, CentroidVersi
     :meth:`start`); a hub that does not know ``CONF:`` gets 8 cameras, 100 Hz, 500 µs,
     threshold 128 and 256 blobs.
     baud : int or "auto"
-        Line rate while streaming (default 12 Mbaud).
+        Line rate while streaming (default 24 Mbaud, the fastest).
     reply_timeout, reconnect_timeout : float
         As :class:`~spotlab.drivers.mcs1.driver.Mcs1Driver`.
 
@@ -90,7 +90,7 @@ class CentroidDriver(FamilyDriver[CentroidConfig, CentroidDecoder, CentroidVersi
         exposure_us: int | None = None,
         threshold: int | None = None,
         max_blobs: int | None = None,
-        baud: int | str = 12_000_000,
+        baud: int | str = DEFAULT_BAUD,
         reply_timeout: float = 1.0,
         reconnect_timeout: float | None = None,
     ) -> None:

@@ -61,6 +61,7 @@ def test_commands_encode_as_the_golden_vectors() -> None:
     assert encode_command("CAMS", "255") == b"CAMS:255C6B4\r"
     assert encode_command("BLOB", "256") == b"BLOB:2567E45\r"
     assert encode_command("COMM", "11") == b"COMM:112E09\r"
+    assert encode_command("COMM", "12") == b"COMM:121E6A\r"
     v = parse_version("CEN 1.0 SIM00091 8 1024 1000000")
     assert (v.cameras, v.max_blobs, v.tick_hz) == (8, 1024, 1_000_000)
 

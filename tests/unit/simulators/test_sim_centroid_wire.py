@@ -50,6 +50,7 @@ def test_overflow_frame_matches_the_golden_vector() -> None:
         ("BLOB:256", b"BLOB:2567E45\r"),
         ("RATE:300000", b"RATE:300000CB66\r"),
         ("COMM:11", b"COMM:112E09\r"),
+        ("COMM:12", b"COMM:121E6A\r"),
     ],
 )
 def test_commands_match_the_golden_vectors(text: str, golden: bytes) -> None:
