@@ -203,7 +203,8 @@ function show3d(markers, cameras) {
     if (reach > view.half) view.half = Math.ceil(reach / 500) * 500;
   }
   const c = document.getElementById("view3d");
-  const g = c.getContext("2d");
+  // opaque (the backdrop fills it): the compositor copies it instead of blending it
+  const g = c.getContext("2d", { alpha: false });
   g.drawImage(drawBackdrop(c, cameras), 0, 0);
   if (!markers) return;
   if (markers.seq !== view.drawnSeq) { view.drawnSeq = markers.seq; received.frames3d += 1; }
@@ -218,9 +219,31 @@ function show3d(markers, cameras) {
   g.beginPath();
   for (const [[x, y]] of shown) { g.moveTo(x + 4, y); g.arc(x, y, 4, 0, 2 * Math.PI); }
   g.fill();
-  g.fillStyle = "#cfd8dc";
+  for (const [[x, y], , i] of shown) {
+    const sprite = labelSprite(markers.labels[i] || "");
+    if (sprite) g.drawImage(sprite, x + 6, y - 4 - LABEL_ASCENT);
+  }
+}
+
+// Each label's text drawn once into a small canvas and copied from there in every frame:
+// a software renderer lays out and rasterises text far more slowly than it copies pixels.
+const LABEL_ASCENT = 9;
+const labelSprites = new Map();
+function labelSprite(text) {
+  if (!text) return null;
+  let sprite = labelSprites.get(text);
+  if (sprite) return sprite;
+  if (labelSprites.size > 2000) labelSprites.clear();  // many labels over a long session
+  sprite = document.createElement("canvas");
+  const g = sprite.getContext("2d");
   g.font = "10px sans-serif";
-  for (const [[x, y], , i] of shown) g.fillText(markers.labels[i] || "", x + 6, y - 4);
+  sprite.width = Math.ceil(g.measureText(text).width) + 2;
+  sprite.height = 13;
+  g.font = "10px sans-serif";  // resizing a canvas resets its state
+  g.fillStyle = "#cfd8dc";
+  g.fillText(text, 0, LABEL_ASCENT);
+  labelSprites.set(text, sprite);
+  return sprite;
 }
 
 // ---- recording and trials ------------------------------------------------------------
@@ -579,7 +602,7 @@ function connect() {
     if (!received.status) return;
     show3d(m.markers, received.status.cameras);
     keepSeries(m.markers);
-    showSeries();
+    if (m.slow !== undefined) showSeries();  // 5 s of history: 10 redraws a second show it
     if (lastMode !== received.status.mode) { lastMode = received.status.mode; refreshTrials(); }
   };
 }
