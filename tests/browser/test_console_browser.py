@@ -276,7 +276,13 @@ def test_the_calibration_wizard_in_the_page(sim_console: tuple[str, Path], brows
     page = browser.new_page(viewport={"width": 1280, "height": 900})
     page.goto(url)
     page.wait_for_function("window.spotlab.calibration && window.spotlab.messages > 0")
-    # first, a device reconnected from the page: it reconnects alone and comes back
+    # first, a device reconnected from the page: it reconnects alone and comes back. The
+    # devices must be streaming first: before the preview session runs (slow to start on
+    # a busy machine, or restarted by an earlier test's settings) a reconnect restarts
+    # the session instead ("the devices start again"), and the wait below timed out.
+    page.wait_for_function(
+        "document.querySelectorAll('#devices td.ok').length === 3", timeout=60_000
+    )
     page.select_option("#device-name", "timer")
     assert page.is_disabled("#device-set-rate") is False
     page.click("#device-reconnect")
