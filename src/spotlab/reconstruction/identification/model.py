@@ -13,7 +13,6 @@ clusters found as the groups of markers whose distances stay constant
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -31,6 +30,12 @@ from spotlab.reconstruction.identification.handedness import (
     learn_references,
     side_table,
 )
+from spotlab.reconstruction.identification.model_json import (
+    model_to_json,
+    read_model_fields,
+    write_model,
+)
+from spotlab.reconstruction.identification.model_parts import Link, Segment
 from spotlab.reconstruction.identification.spreads import (
     check_motion,
     least_varying,
@@ -52,42 +57,6 @@ LENGTH_SCALE_MM = 500.0
 #: Chosen link spread: this many rigid tolerances, and at least ``LINK_FLOOR_MM``.
 LINK_FACTOR = 5.0
 LINK_FLOOR_MM = 50.0
-
-
-@dataclass(frozen=True)
-class Link:
-    """Two markers whose distance stays within ``[min_mm, max_mm]``.
-
-    Attributes
-    ----------
-    a, b : int
-        Marker indices in :attr:`MarkerModel.labels`.
-    min_mm, max_mm : float
-        Range of their distance (mm).
-    """
-
-    a: int
-    b: int
-    min_mm: float
-    max_mm: float
-
-
-@dataclass(frozen=True)
-class Segment:
-    """One rigid cluster.
-
-    Attributes
-    ----------
-    name : str
-    markers : tuple of int
-        Indices of its markers in :attr:`MarkerModel.labels` (at least 3).
-    coordinates : ndarray, shape (P, 3)
-        Marker positions in the segment's frame (mm), centred on their mean.
-    """
-
-    name: str
-    markers: tuple[int, ...]
-    coordinates: FloatArray
 
 
 @dataclass(frozen=True)
@@ -420,89 +389,19 @@ class MarkerModel:
         )
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-safe description (the file layout of :meth:`save`); ``references`` only
-        when the model has some."""
-        out: dict[str, Any] = {
-            "labels": list(self.labels),
-            "tolerance_mm": self.tolerance_mm,
-            "link_spread_mm": self.link_spread_mm,
-            "segments": [
-                {
-                    "name": seg.name,
-                    "markers": [self.labels[m] for m in seg.markers],
-                    "coordinates_mm": seg.coordinates.round(4).tolist(),
-                }
-                for seg in self.segments
-            ],
-            "links": [
-                {
-                    "markers": [self.labels[k.a], self.labels[k.b]],
-                    "range_mm": [round(k.min_mm, 4), round(k.max_mm, 4)],
-                }
-                for k in self.links
-            ],
-        }
-        if self.references:
-            out["references"] = [
-                {
-                    "segment": self.segments[r.segment].name,
-                    "marker": self.labels[r.marker],
-                    "direction": r.direction.round(6).tolist(),
-                    "spread_deg": round(r.spread_deg, 4),
-                    "triple": [self.labels[m] for m in r.triple],
-                    "side": r.side,
-                }
-                for r in self.references
-            ]
-        return out
+        """JSON-safe description (the file layout of :meth:`save`,
+        :func:`~.model_json.model_to_json`)."""
+        return model_to_json(self)
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the model as JSON."""
-        with open(path, "w", encoding="utf-8") as fh:
-            json.dump(self.to_json(), fh, indent=1)
+        write_model(self, path)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> MarkerModel:
         """Read a model written by :meth:`save`; a malformed file is a ReconstructionError."""
-        try:
-            with open(path, encoding="utf-8") as fh:
-                data = json.load(fh)
-            labels = tuple(str(x) for x in data["labels"])
-            index = {name: m for m, name in enumerate(labels)}
-            segments = tuple(
-                Segment(
-                    str(s["name"]),
-                    tuple(index[str(x)] for x in s["markers"]),
-                    np.asarray(s["coordinates_mm"], dtype=np.float64).reshape(-1, 3),
-                )
-                for s in data["segments"]
-            )
-            links = tuple(
-                Link(index[str(k["markers"][0])], index[str(k["markers"][1])],
-                     float(k["range_mm"][0]), float(k["range_mm"][1]))
-                for k in data.get("links", [])
-            )  # fmt: skip
-            seg_index = {seg.name: s for s, seg in enumerate(segments)}
-            references = tuple(
-                Reference(
-                    seg_index[str(r["segment"])],
-                    index[str(r["marker"])],
-                    np.asarray(r["direction"], dtype=np.float64).reshape(3),
-                    float(r["spread_deg"]),
-                    tuple(index[str(x)] for x in r.get("triple", [])),
-                    int(r.get("side", 0)),
-                )
-                for r in data.get("references", [])
-            )
-            tolerance = data.get("tolerance_mm")
-            link_spread = data.get("link_spread_mm")
-            learnt = (
-                None if tolerance is None else float(tolerance),
-                None if link_spread is None else float(link_spread),
-            )
-        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as exc:
-            raise ReconstructionError(f"{path}: not a marker model ({exc})") from None
-        return cls(labels, segments, links, *learnt, references=references)
+        labels, segments, links, tolerance, link_spread, references = read_model_fields(path)
+        return cls(labels, segments, links, tolerance, link_spread, references=references)
 
 
 def _positions(positions: Any, M: int) -> FloatArray:
