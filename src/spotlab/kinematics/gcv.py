@@ -31,9 +31,13 @@ from numpy.typing import NDArray
 from scipy import linalg, optimize
 from scipy.linalg import lapack
 
+from spotlab.core import native
 from spotlab.kinematics import _banded
 
 FloatArray = NDArray[np.float64]
+
+#: The compiled kernel (``_c_gcv.c``); without it the numpy code here is its twin.
+KERNEL = "spotlab.kinematics._c_gcv"
 
 
 @dataclass(frozen=True)
@@ -80,8 +84,10 @@ class PenalisedSpline:
         # LAPACK's band layout is column-major: keep the bands so, to factor in place
         self.r = np.asfortranarray(_banded.bspline_gram_band(x, m))
         self.qwq = np.asfortranarray(_banded.qwq_band(self.q, self.winv))
-        self._work = np.empty_like(self.r, order="F")
-        self._trace = _banded.InverseTrace(self.r)
+        # the numpy twin's work arrays, made when first needed (the kernel has its own)
+        self._work_band: FloatArray | None = None
+        self._trace_work: _banded.InverseTrace | None = None
+        self.kernel = native.load(KERNEL)
         self.factorial2 = float(math.factorial(m) ** 2)
         # p where the fit goes from near-interpolation (spline wavelength ~ the median
         # sample spacing) to the polynomial (wavelength ~ the record): the search range
@@ -91,6 +97,48 @@ class PenalisedSpline:
             order * np.log10(np.median(np.diff(x))) - np.log10(w_mean) - 3.0,
             order * np.log10(x[-1] - x[0]) - np.log10(w_mean) + 3.0,
         )
+
+    @property
+    def _work(self) -> FloatArray:
+        if self._work_band is None:
+            self._work_band = np.empty_like(self.r, order="F")
+        return self._work_band
+
+    @property
+    def _trace(self) -> _banded.InverseTrace:
+        if self._trace_work is None:
+            self._trace_work = _banded.InverseTrace(self.r)
+        return self._trace_work
+
+    def kernel_arrays(self) -> tuple[FloatArray, ...]:
+        """q, r, qwq, w, 1/w as the kernel reads them (C-contiguous views, no copies)."""
+        # the bands are column-major (m + 1, N - m): their transposes are C-contiguous
+        return self.q, self.r.T, self.qwq.T, self.w, self.winv
+
+    def fit(
+        self, p: float, y: FloatArray, trace: bool = True
+    ) -> tuple[FloatArray, FloatArray, float]:
+        """Fitted values (N, K), ``sum(w r^2)`` (K,) and ``n - dof`` at p, by the kernel.
+
+        ``n - dof`` is floored at the smallest normal float as in :meth:`statistics`, and
+        is 0.0 when ``trace`` is False (not computed). Only with the kernel loaded.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            When the banded matrix is not positive definite to working precision.
+        """
+        assert self.kernel is not None, "the compiled kernel is not loaded"
+        y = np.ascontiguousarray(y, dtype=np.float64)
+        fitted = np.empty_like(y)
+        rss = np.empty(y.shape[1])
+        rdof = self.kernel.fit(
+            *self.kernel_arrays(), y, fitted, rss, self.m, y.shape[0], y.shape[1],
+            float(p), self.factorial2, trace,
+        )  # fmt: skip
+        if rdof is None:
+            raise linalg.LinAlgError("banded matrix not positive definite")
+        return fitted, rss, float(rdof)
 
     def factor(self, p: float) -> FloatArray:
         """Upper banded Cholesky factor of ``R + p (m!)^2 Q^T W^-1 Q``, shape (m + 1, N - m).
@@ -102,9 +150,10 @@ class PenalisedSpline:
         numpy.linalg.LinAlgError
             When the matrix is not positive definite to working precision.
         """
-        np.multiply(self.qwq, p * self.factorial2, out=self._work)
-        self._work += self.r
-        chol, info = lapack.dpbtrf(self._work, lower=0, overwrite_ab=1)
+        work = self._work
+        np.multiply(self.qwq, p * self.factorial2, out=work)
+        work += self.r
+        chol, info = lapack.dpbtrf(work, lower=0, overwrite_ab=1)
         if info != 0:
             raise linalg.LinAlgError(f"{info}-th leading minor not positive definite")
         return np.asarray(chol)
@@ -138,13 +187,17 @@ class PenalisedSpline:
         self, p: float, y: FloatArray, rhs: FloatArray | None = None
     ) -> tuple[FloatArray, FitStatistics]:
         """Fitted values and fit figures at smoothing parameter p."""
-        fitted, chol = self.solve(p, y, rhs)
         n = self.n_eff
-        msr = (self.w[:, None] * (y - fitted) ** 2).sum(axis=0) / n
-        # tr(I - A) = p (m!)^2 tr(Sigma Q^T W^-1 Q) = tr(Sigma (M - R)) = (N - m) - tr(Sigma R):
-        # only Sigma's band is needed, and no large divided differences enter
-        rdof = self.r.shape[1] - self._trace(chol)
-        rdof = max(rdof, np.finfo(float).tiny)
+        if self.kernel is not None:
+            fitted, rss, rdof = self.fit(p, y)
+            msr = rss / n
+        else:
+            fitted, chol = self.solve(p, y, rhs)
+            msr = (self.w[:, None] * (y - fitted) ** 2).sum(axis=0) / n
+            # tr(I - A) = p (m!)^2 tr(Sigma Q^T W^-1 Q) = tr(Sigma (M - R)) = (N - m) -
+            # tr(Sigma R): only Sigma's band is needed, and no large divided differences enter
+            rdof = self.r.shape[1] - self._trace(chol)
+            rdof = max(rdof, np.finfo(float).tiny)
         gcv = msr / (rdof / n) ** 2
         return fitted, FitStatistics(msr=msr, dof=n - rdof, gcv=gcv, variance=msr * n / rdof)
 
@@ -266,6 +319,9 @@ def gcv_fit(
     whole), so a few full-size evaluations suffice. The walk finds the local
     minimum nearest to that start.
     """
+    if problem.kernel is not None and (x is None or problem.n_eff <= LONG_RECORD):
+        ps, fitted, each = search_native(problem, y, step)
+        return float(ps[0]), fitted, each[0]
     criterion = _Criterion([(problem, y)])
     lo, hi = problem.log_p_range
     if x is None or problem.n_eff <= LONG_RECORD:
@@ -285,6 +341,46 @@ def gcv_fit(
     return p, fitted, stats
 
 
+def search_native(
+    problem: PenalisedSpline, y: FloatArray, step: float = 2.0
+) -> tuple[FloatArray, FloatArray, list[FitStatistics]]:
+    """The scan-and-refine search of :func:`gcv_fit` for every channel of y (N, K), compiled.
+
+    One kernel call: the scan's factors and traces are shared by the channels, the
+    Brent refinements (:func:`~spotlab.kinematics._brent.bounded_brent`'s arithmetic)
+    run channel by channel. Returns p (K,), the fitted values (N, K) and each channel's
+    figures, as :func:`~spotlab.kinematics.gcv_batch.gcv_fit_many` does.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When the banded matrix at a channel's chosen p is not positive definite.
+    """
+    assert problem.kernel is not None, "the compiled kernel is not loaded"
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    n, k = y.shape
+    lo, hi = problem.log_p_range
+    grid = np.arange(lo, hi + step, step)
+    fitted = np.empty_like(y)
+    log_p, rss, rdof = np.empty(k), np.empty(k), np.empty(k)
+    failures = problem.kernel.search(
+        *problem.kernel_arrays(), y, fitted, grid, log_p, rss, rdof, problem.m, n, k,
+        problem.factorial2, 1e-6,
+    )  # fmt: skip
+    if failures:
+        raise linalg.LinAlgError(f"{failures} channel(s): banded matrix not positive definite")
+    stats = []
+    for j in range(k):
+        msr = np.array([rss[j] / n])
+        stats.append(
+            FitStatistics(
+                msr=msr, dof=n - rdof[j], gcv=msr / (rdof[j] / n) ** 2, variance=msr * n / rdof[j]
+            )
+        )
+    # p as Python floats, like the numpy search (numpy's power may differ in the last bit)
+    return np.array([10.0 ** float(v) for v in log_p]), fitted, stats
+
+
 def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
     """Smoothing parameter with ``sum(w r^2) = N`` (Wood & Jennings 1979) for one channel.
 
@@ -296,6 +392,8 @@ def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
     n = problem.n_eff
 
     def excess(log_p: float) -> float:
+        if problem.kernel is not None:
+            return float(problem.fit(10.0**log_p, y, trace=False)[1].sum() / n - 1.0)
         fitted, _ = problem.solve(10.0**log_p, y)
         return float((problem.w[:, None] * (y - fitted) ** 2).sum() / n - 1.0)
 

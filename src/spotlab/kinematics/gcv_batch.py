@@ -34,7 +34,13 @@ from scipy.linalg import lapack
 
 from spotlab.kinematics import _banded
 from spotlab.kinematics._brent import bounded_brent
-from spotlab.kinematics.gcv import LONG_RECORD, FitStatistics, PenalisedSpline, gcv_fit
+from spotlab.kinematics.gcv import (
+    LONG_RECORD,
+    FitStatistics,
+    PenalisedSpline,
+    gcv_fit,
+    search_native,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -243,6 +249,8 @@ def gcv_fit_many(
             cols.append(fitted[:, 0])
             stats.append(st)
         return np.array(ps), np.stack(cols, axis=1), stats
+    if problem.kernel is not None:
+        return search_native(problem, y, step)
     channels = _Channels(problem, y)
     lo, hi = problem.log_p_range
     grid = np.arange(lo, hi + step, step)
