@@ -13,8 +13,9 @@
  *                             storage read column after column: [j, m - d] = A[j - d, j]
  *   w, winv    (n,)           weights and their inverses
  *   y, fitted  (n, k)         samples and fitted values, channels side by side
- * with rows = n - m. The factor is LAPACK's dpbtf2 (upper), the solves dtbsv's, in
- * their order of operations; sums of residuals are numpy's pairwise sums. The numeric
+ * with rows = n - m. The factor is A = U^T D U (U unit upper triangular; the twin uses
+ * LAPACK's A = U^T U, equal to rounding); the sums of residuals are numpy's pairwise
+ * sums. The numeric
  * work runs without the GIL.
  */
 #define PY_SSIZE_T_CLEAN
@@ -67,42 +68,67 @@ typedef struct {
 
 typedef struct {
     double *ab;    /* (rows, m + 1) the factor */
-    double *col;   /* (n,) one channel's samples */
+    const double *col; /* (n,) one channel's samples: y or buffer */
+    double *buffer;    /* (n,) a channel of several, or NULL for one */
     double *rhs;   /* (rows,) Q^T y of that channel */
     double *delta; /* (rows,) the solution */
-    double *terms; /* (n,) w r^2, summed pairwise */
 } Work;
 
 /* ---------------------------------------------------------------- algebra */
 
-/* A = qwq * (p (m!)^2) + r, factored in place into U (A = U^T U); 0 or the failing column + 1. */
+/* A = qwq * (p (m!)^2) + r, factored in place as A = U^T D U, U unit upper triangular
+ * (U[j, j + t] in A's slots, 1 / D[j] on the diagonal); 0 or the failing column + 1.
+ * LDL^T rather than LAPACK's LL^T: no square root on the chain from column to column. */
 INLINE Py_ssize_t factor_bw(const Problem *P, double p, double *ab, const int bw)
 {
+    enum { MAXBW = 9 };
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
     const double s = p * P->fact2;
-    for (Py_ssize_t i = 0; i < n * ld; i++) {
-        ab[i] = P->qwq[i] * s + P->r[i];
+    /* B[r][c] = A[j + r, j + c] (r <= c <= bw) as updated by the columns before j; the
+     * entries of column j + bw are still A's own, assembled here from qwq and r. Columns
+     * past the end are zero: they neither couple nor get stored. */
+    double B[MAXBW][MAXBW], v[MAXBW], l[MAXBW];
+    /* the slots above the first columns (rows before 0) are zero: the solves read them */
+    for (Py_ssize_t j = 0; j < bw && j < n; j++) {
+        for (int t = 0; t < bw - j; t++) {
+            ab[j * ld + t] = 0.0;
+        }
+    }
+    for (int r = 0; r < bw; r++) {
+        for (int c = r; c < bw; c++) {
+            const Py_ssize_t col = c;
+            B[r][c] = col < n ? P->qwq[col * ld + bw - (c - r)] * s + P->r[col * ld + bw - (c - r)]
+                              : 0.0;
+        }
     }
     for (Py_ssize_t j = 0; j < n; j++) {
-        double ajj = ab[j * ld + bw];
-        if (ajj <= 0.0) {
+        const Py_ssize_t col = j + bw;
+        for (int r = 0; r <= bw; r++) {
+            const Py_ssize_t at = col * ld + r; /* A[j + r, j + bw] */
+            B[r][bw] = col < n ? P->qwq[at] * s + P->r[at] : 0.0;
+        }
+        const double d = B[0][0];
+        if (!(d > 0.0)) {
             return j + 1;
         }
-        ajj = sqrt(ajj);
-        ab[j * ld + bw] = ajj;
-        int kn = (n - 1 - j < bw) ? (int)(n - 1 - j) : bw;
-        if (kn > 0) {
-            const double rcp = 1.0 / ajj;
-            for (int t = 1; t <= kn; t++) {
-                ab[(j + t) * ld + bw - t] *= rcp;
+        const double rd = 1.0 / d;
+        ab[j * ld + bw] = rd;
+        for (int t = 1; t <= bw; t++) {
+            v[t] = B[0][t];
+            l[t] = v[t] * rd;
+        }
+        for (int c = 1; c <= bw; c++) {
+            for (int r = 1; r <= c; r++) {
+                B[r][c] -= l[r] * v[c];
             }
-            /* rank-one update of the trailing kn x kn block (dsyr, upper, alpha -1) */
-            for (int c = 1; c <= kn; c++) {
-                const double temp = -ab[(j + c) * ld + bw - c];
-                for (int rr = 1; rr <= c; rr++) {
-                    ab[(j + c) * ld + bw - (c - rr)] += ab[(j + rr) * ld + bw - rr] * temp;
-                }
+            if (j + c < n) {
+                ab[(j + c) * ld + bw - c] = l[c];
+            }
+        }
+        for (int r = 0; r < bw; r++) {
+            for (int c = r; c < bw; c++) {
+                B[r][c] = B[r + 1][c + 1];
             }
         }
     }
@@ -116,29 +142,46 @@ static Py_ssize_t factor(const Problem *P, double p, double *ab)
     return out;
 }
 
-/* delta = inv(U^T U) rhs (dpbtrs: U^T z = rhs forward, then U delta = z backward). */
+/* delta = inv(U^T D U) rhs: U^T z = rhs forward, then U delta = D^-1 z backward. */
 INLINE void solve_bw(const Problem *P, const double *ab, const double *rhs, double *x,
                      const int bw)
 {
+    enum { MAXBW = 9 };
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
+    /* z[a] = the solution at j - bw + a, kept in registers (zero before the start) */
+    double z[MAXBW];
+    for (int a = 0; a < bw; a++) {
+        z[a] = 0.0;
+    }
     for (Py_ssize_t j = 0; j < n; j++) {
         double temp = rhs[j];
-        Py_ssize_t i0 = j - bw > 0 ? j - bw : 0;
-        for (Py_ssize_t i = i0; i < j; i++) {
-            temp -= ab[j * ld + bw - (j - i)] * x[i];
+        for (int a = 0; a < bw; a++) { /* x[j - 1] last: the shortest chain */
+            temp -= ab[j * ld + a] * z[a];
         }
-        x[j] = temp / ab[j * ld + bw];
+        for (int a = 0; a + 1 < bw; a++) {
+            z[a] = z[a + 1];
+        }
+        z[bw - 1] = temp;
+        x[j] = temp;
+    }
+    /* backward: z[a] = delta at j + 1 + a (zero past the end) */
+    for (int a = 0; a < bw; a++) {
+        z[a] = 0.0;
     }
     for (Py_ssize_t j = n - 1; j >= 0; j--) {
-        if (x[j] != 0.0) {
-            x[j] = x[j] / ab[j * ld + bw];
-            const double temp = x[j];
-            Py_ssize_t i1 = j - bw > 0 ? j - bw : 0;
-            for (Py_ssize_t i = j - 1; i >= i1; i--) {
-                x[i] -= temp * ab[j * ld + bw - (j - i)];
+        double temp = x[j] * ab[j * ld + bw];
+        for (int a = bw - 1; a >= 0; a--) { /* delta[j + 1] last */
+            const Py_ssize_t i = j + 1 + a;
+            if (i < n) {
+                temp -= ab[i * ld + bw - (a + 1)] * z[a];
             }
         }
+        for (int a = bw - 1; a > 0; a--) {
+            z[a] = z[a - 1];
+        }
+        z[0] = temp;
+        x[j] = temp;
     }
 }
 
@@ -147,21 +190,25 @@ static void solve(const Problem *P, const double *ab, const double *rhs, double 
     BY_BANDWIDTH(P->m, solve_bw(P, ab, rhs, x, BW));
 }
 
-/* tr(inv(A) R) from U, by Takahashi's backward recursion over a bw x bw window of inv(A). */
+/* tr(inv(A) R) from A = U^T D U, by Takahashi's backward recursion over a bw x bw window
+ * X of inv(A): row i of the inverse is -X c beyond the diagonal (c = U[i, i + 1 ..]) and
+ * 1 / D[i] + c . X c on it (Hutchinson & de Hoog 1985). */
 INLINE double trace_bw(const Problem *P, const double *ab, const int bw)
 {
-    enum { MAXBW = 8 };
+    enum { MAXBW = 9 };
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
     double win[MAXBW][MAXBW], next[MAXBW][MAXBW], c[MAXBW], y[MAXBW];
-    memset(win, 0, sizeof win);
-    memset(next, 0, sizeof next);
+    for (int a = 0; a < bw; a++) {
+        for (int b = 0; b < bw; b++) {
+            win[a][b] = 0.0;
+        }
+    }
     double acc = 0.0;
     for (Py_ssize_t i = n - 1; i >= 0; i--) {
-        const double uii = ab[i * ld + bw];
         for (int a = 0; a < bw; a++) {
             Py_ssize_t jj = i + 1 + a;
-            c[a] = jj < n ? ab[jj * ld + bw - (a + 1)] / uii : 0.0;
+            c[a] = jj < n ? ab[jj * ld + bw - (a + 1)] : 0.0;
         }
         /* y = X c: minus row i of the inverse beyond the diagonal */
         for (int a = 0; a < bw; a++) {
@@ -171,7 +218,7 @@ INLINE double trace_bw(const Problem *P, const double *ab, const int bw)
             }
             y[a] = s;
         }
-        double corner = 1.0 / (uii * uii);
+        double corner = ab[i * ld + bw];
         for (int a = 0; a < bw; a++) {
             corner += c[a] * y[a];
         }
@@ -252,51 +299,79 @@ static void qt_times(const Problem *P, const double *y, double *out)
     }
 }
 
-/* sum(w (y - f)^2) with f = y - p (m!)^2 W^-1 Q delta; f written to fitted (stride) if given. */
-INLINE double residuals_bw(const Problem *P, double p, const double *y, const double *delta,
-                           double *terms, double *fitted, Py_ssize_t stride, const int bw)
+/* One fit's residuals: f = y - s W^-1 Q delta (s = p (m!)^2), written to fitted (stride)
+ * if given, and the terms w (y - f)^2. */
+typedef struct {
+    const Problem *P;
+    double s;
+    const double *y, *delta;
+    double *fitted;
+    Py_ssize_t stride;
+} Residuals;
+
+/* terms[i - i0] = w_i (y_i - f_i)^2 for i in i0 .. i0 + count - 1. */
+INLINE void residual_terms_bw(const Residuals *R, Py_ssize_t i0, Py_ssize_t count,
+                              double *terms, const int bw)
 {
+    const Problem *P = R->P;
     const int ld = bw + 1;
-    const double s = p * P->fact2;
     const Py_ssize_t rows = P->rows;
-    for (Py_ssize_t i = 0; i < P->n; i++) {
+    for (Py_ssize_t i = i0; i < i0 + count; i++) {
         /* (Q delta)_i = sum over a of q[i - a, a] delta[i - a], a increasing */
         double qd = 0.0;
         if (i >= bw && i < rows) {
             for (int a = 0; a < ld; a++) {
-                qd += P->q[(i - a) * ld + a] * delta[i - a];
+                qd += P->q[(i - a) * ld + a] * R->delta[i - a];
             }
         } else {
             for (int a = 0; a < ld; a++) {
                 Py_ssize_t j = i - a;
                 if (j >= 0 && j < rows) {
-                    qd += P->q[j * ld + a] * delta[j];
+                    qd += P->q[j * ld + a] * R->delta[j];
                 }
             }
         }
-        const double f = y[i] - (s * P->winv[i]) * qd;
-        const double res = y[i] - f;
-        terms[i] = P->w[i] * (res * res);
-        if (fitted != NULL) {
-            fitted[i * stride] = f;
+        const double f = R->y[i] - (R->s * P->winv[i]) * qd;
+        const double res = R->y[i] - f;
+        terms[i - i0] = P->w[i] * (res * res);
+        if (R->fitted != NULL) {
+            R->fitted[i * R->stride] = f;
         }
     }
-    return pairwise(terms, P->n);
 }
 
-static double residuals(const Problem *P, double p, const double *y, const double *delta,
-                        double *terms, double *fitted, Py_ssize_t stride)
+/* sum of the terms of i0 .. i0 + n - 1, split as numpy's pairwise sum splits an array of n. */
+static double residual_sum(const Residuals *R, Py_ssize_t i0, Py_ssize_t n)
 {
-    double out = 0.0;
-    BY_BANDWIDTH(P->m, out = residuals_bw(P, p, y, delta, terms, fitted, stride, BW));
-    return out;
+    if (n <= 128) {
+        double terms[128];
+        BY_BANDWIDTH(R->P->m, residual_terms_bw(R, i0, n, terms, BW));
+        return pairwise(terms, n);
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return residual_sum(R, i0, n2) + residual_sum(R, i0 + n2, n - n2);
 }
 
-/* Channel ch's samples into work->col and Q^T of them into work->rhs. */
+/* sum(w (y - f)^2) with f = y - p (m!)^2 W^-1 Q delta; f written to fitted (stride) if given. */
+static double residuals(const Problem *P, double p, const double *y, const double *delta,
+                        double *fitted, Py_ssize_t stride)
+{
+    const Residuals R = {P, p * P->fact2, y, delta, fitted, stride};
+    return residual_sum(&R, 0, P->n);
+}
+
+/* Channel ch's samples into work->col (y itself for one channel) and Q^T of them into
+ * work->rhs. */
 static void load_channel(const Problem *P, const double *y, Py_ssize_t ch, Work *wk)
 {
-    for (Py_ssize_t i = 0; i < P->n; i++) {
-        wk->col[i] = y[i * P->k + ch];
+    if (P->k == 1) {
+        wk->col = y;
+    } else {
+        for (Py_ssize_t i = 0; i < P->n; i++) {
+            wk->buffer[i] = y[i * P->k + ch];
+        }
+        wk->col = wk->buffer;
     }
     qt_times(P, wk->col, wk->rhs);
 }
@@ -329,7 +404,7 @@ static double evaluate(const Problem *P, Work *wk, double log_p)
         return INFINITY;
     }
     solve(P, wk->ab, wk->rhs, wk->delta);
-    double rss = residuals(P, p, wk->col, wk->delta, wk->terms, NULL, 0);
+    double rss = residuals(P, p, wk->col, wk->delta, NULL, 0);
     return criterion(P, rss, residual_dof(P, wk->ab));
 }
 
@@ -426,25 +501,118 @@ static double bounded_brent(const Problem *P, Work *wk, double lo, double hi, do
     return xf;
 }
 
+/* ------------------------------------------------------------ the bands */
+
+/* Divided differences q (rows, m + 1), Q^T W^-1 Q and R in band columns (rows, m + 1),
+ * with the operations of _banded.divided_differences, qwq_band and bspline_gram_band:
+ * R's Gauss sums per sample interval (nodes, weights: Gauss-Legendre, m points), the
+ * B-spline values by Cox-de Boor on knots x padded by m - 1 steps each side. */
+static void bands(const double *x, const double *winv, Py_ssize_t n, int m, const double *nodes,
+                  const double *weights, double *q, double *qwq, double *r)
+{
+    enum { MAXM = 9 };
+    const int ld = m + 1, degree = m - 1;
+    const Py_ssize_t rows = n - m;
+    for (Py_ssize_t j = 0; j < rows; j++) {
+        for (int a = 0; a <= m; a++) {
+            double v = 1.0;
+            for (int b = 0; b <= m; b++) {
+                if (a != b) {
+                    v /= x[j + a] - x[j + b];
+                }
+            }
+            q[j * ld + a] = v;
+        }
+    }
+    for (Py_ssize_t i = 0; i < rows * ld; i++) {
+        qwq[i] = 0.0;
+        r[i] = 0.0;
+    }
+    /* entry (j, j + d) of Q^T W^-1 Q, at [j + d, m - d] */
+    for (int d = 0; d <= m; d++) {
+        for (Py_ssize_t j = 0; j + d < rows; j++) {
+            double acc = 0.0;
+            for (int a = d; a <= m; a++) {
+                acc += q[j * ld + a] * q[(j + d) * ld + a - d] * winv[j + a];
+            }
+            qwq[(j + d) * ld + m - d] = acc;
+        }
+    }
+    /* knots[k] for k in 0 .. n + 2m - 3: x padded by m - 1 steps of the end intervals */
+#define KNOT(k)                                                                                \
+    ((k) < degree ? x[0] - (double)(degree - (k)) * (x[1] - x[0])                              \
+                  : ((k) - degree < n ? x[(k) - degree]                                        \
+                                      : x[n - 1] + (double)((k) - degree - n + 1) *            \
+                                                       (x[n - 1] - x[n - 2])))
+    /* intervals last first: each band entry then adds its pairs in the twin's order */
+    for (Py_ssize_t i = n - 2; i >= 0; i--) {
+        const double h = x[i + 1] - x[i];
+        const double mid = 0.5 * (x[i + 1] + x[i]), half = 0.5 * h;
+        double vals[MAXM][MAXM]; /* vals[s][g]: B-spline i - m + 1 + s at point g */
+        double pts[MAXM], qw[MAXM];
+        for (int g = 0; g < m; g++) {
+            pts[g] = mid + half * nodes[g];
+            qw[g] = half * weights[g];
+            vals[0][g] = 1.0;
+        }
+        for (int rr = 1; rr <= degree; rr++) {
+            for (int g = 0; g < m; g++) {
+                double saved = 0.0, nxt[MAXM];
+                for (int s2 = 0; s2 < rr; s2++) {
+                    const double right = KNOT(degree + s2 + 1 + i) - pts[g];
+                    const double left = pts[g] - KNOT(degree + s2 + 1 - rr + i);
+                    const double term = vals[s2][g] / (right + left);
+                    nxt[s2] = saved + right * term;
+                    saved = left * term;
+                }
+                nxt[rr] = saved;
+                for (int s2 = 0; s2 <= rr; s2++) {
+                    vals[s2][g] = nxt[s2];
+                }
+            }
+        }
+        for (int a = 0; a < m; a++) {
+            const Py_ssize_t j = i - (m - 1) + a; /* the row of B-spline a */
+            for (int b = a; b < m; b++) {
+                const int d = b - a;
+                if (j < 0 || j + d >= rows) {
+                    continue;
+                }
+                double sum = 0.0;
+                for (int g = 0; g < m; g++) {
+                    sum += qw[g] * vals[a][g] * vals[b][g];
+                }
+                r[(j + d) * ld + m - d] += sum;
+            }
+        }
+    }
+#undef KNOT
+    for (Py_ssize_t j = 0; j < rows; j++) {
+        const double sj = (double)m / (x[j + m] - x[j]);
+        for (int d = 0; d <= m && j + d < rows; d++) {
+            const double sd = (double)m / (x[j + d + m] - x[j + d]);
+            r[(j + d) * ld + m - d] *= sj * sd;
+        }
+    }
+}
+
 /* ------------------------------------------------------------ Python glue */
 
 static int work_alloc(const Problem *P, Work *wk)
 {
     wk->ab = malloc(sizeof(double) * (size_t)(P->rows * (P->m + 1)));
-    wk->col = malloc(sizeof(double) * (size_t)P->n);
+    wk->buffer = P->k > 1 ? malloc(sizeof(double) * (size_t)P->n) : NULL;
     wk->rhs = malloc(sizeof(double) * (size_t)P->rows);
     wk->delta = malloc(sizeof(double) * (size_t)P->rows);
-    wk->terms = malloc(sizeof(double) * (size_t)P->n);
-    return wk->ab && wk->col && wk->rhs && wk->delta && wk->terms;
+    return wk->ab && (wk->buffer || P->k == 1) && wk->rhs && wk->delta;
 }
 
 static void work_free(Work *wk)
 {
     free(wk->ab);
-    free(wk->col);
+    free(wk->buffer);
     free(wk->rhs);
     free(wk->delta);
-    free(wk->terms);
 }
 
 /* A contiguous float64 buffer of exactly `count` items; writable if asked. */
@@ -549,7 +717,7 @@ static PyObject *gcv_fit(PyObject *self, PyObject *args)
             for (Py_ssize_t ch = 0; ch < k; ch++) {
                 load_channel(&P, y, ch, &wk);
                 solve(&P, wk.ab, wk.rhs, wk.delta);
-                rss[ch] = residuals(&P, p, wk.col, wk.delta, wk.terms, fitted + ch, k);
+                rss[ch] = residuals(&P, p, wk.col, wk.delta, fitted + ch, k);
             }
             if (want_trace) {
                 rdof = residual_dof(&P, wk.ab);
@@ -636,7 +804,7 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
             for (Py_ssize_t ch = 0; ch < k; ch++) {
                 load_channel(&P, y, ch, &wk);
                 solve(&P, wk.ab, wk.rhs, wk.delta);
-                double s = residuals(&P, p, wk.col, wk.delta, wk.terms, NULL, 0);
+                double s = residuals(&P, p, wk.col, wk.delta, NULL, 0);
                 values[g * k + ch] = criterion(&P, s, rd);
             }
         }
@@ -667,7 +835,7 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
                 continue;
             }
             solve(&P, wk.ab, wk.rhs, wk.delta);
-            rss[ch] = residuals(&P, p, wk.col, wk.delta, wk.terms, fitted + ch, k);
+            rss[ch] = residuals(&P, p, wk.col, wk.delta, fitted + ch, k);
             rdof[ch] = residual_dof(&P, wk.ab);
         }
         Py_END_ALLOW_THREADS;
@@ -682,9 +850,48 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
     return PyLong_FromSsize_t(failures);
 }
 
+PyDoc_STRVAR(bands_doc, "bands(x, winv, nodes, weights, q, qwq, r, m, n)\n"
+                        "--\n\n"
+                        "The divided differences q (n - m, m + 1) and the bands of Q^T W^-1 Q\n"
+                        "and R (n - m, m + 1, band columns) of samples x (n,), weights 1/winv,\n"
+                        "written into q, qwq and r; nodes and weights: m-point Gauss-Legendre.");
+
+static PyObject *gcv_bands(PyObject *self, PyObject *args)
+{
+    PyObject *objs[7];
+    int m;
+    Py_ssize_t n;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOOOin:bands", &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &objs[5], &objs[6], &m, &n)) {
+        return NULL;
+    }
+    if (m < 1 || m > 8 || n < m + 2) {
+        PyErr_SetString(PyExc_ValueError, "need 1 <= m <= 8 and n >= m + 2");
+        return NULL;
+    }
+    static const char *names[7] = {"x", "winv", "nodes", "weights", "q", "qwq", "r"};
+    const Py_ssize_t band = (n - m) * (m + 1);
+    const Py_ssize_t counts[7] = {n, n, m, m, band, band, band};
+    Py_buffer views[7];
+    for (int i = 0; i < 7; i++) {
+        if (get_buffer(objs[i], &views[i], counts[i], i >= 4, names[i]) != 0) {
+            release(views, i);
+            return NULL;
+        }
+    }
+    Py_BEGIN_ALLOW_THREADS;
+    bands(views[0].buf, views[1].buf, n, m, views[2].buf, views[3].buf, views[4].buf,
+          views[5].buf, views[6].buf);
+    Py_END_ALLOW_THREADS;
+    release(views, 7);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"fit", gcv_fit, METH_VARARGS, fit_doc},
     {"search", gcv_search, METH_VARARGS, search_doc},
+    {"bands", gcv_bands, METH_VARARGS, bands_doc},
     {NULL, NULL, 0, NULL},
 };
 

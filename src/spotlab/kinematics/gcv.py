@@ -80,14 +80,27 @@ class PenalisedSpline:
         self.w = w
         self.winv = 1.0 / w
         self.n_eff = x.size
-        self.q = _banded.divided_differences(x, m)
-        # LAPACK's band layout is column-major: keep the bands so, to factor in place
-        self.r = np.asfortranarray(_banded.bspline_gram_band(x, m))
-        self.qwq = np.asfortranarray(_banded.qwq_band(self.q, self.winv))
+        self.kernel = native.load(KERNEL)
+        if self.kernel is not None:
+            # the kernel writes the bands column after column: their transposes are
+            # LAPACK's column-major band layout, as the twin keeps them
+            rows = x.size - m
+            self.q = np.empty((rows, m + 1))
+            qwq, r = np.empty((rows, m + 1)), np.empty((rows, m + 1))
+            nodes, weights = np.polynomial.legendre.leggauss(m)
+            self.kernel.bands(
+                np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(self.winv),
+                nodes, weights, self.q, qwq, r, m, x.size,
+            )  # fmt: skip
+            self.r, self.qwq = r.T, qwq.T
+        else:
+            self.q = _banded.divided_differences(x, m)
+            # LAPACK's band layout is column-major: keep the bands so, to factor in place
+            self.r = np.asfortranarray(_banded.bspline_gram_band(x, m))
+            self.qwq = np.asfortranarray(_banded.qwq_band(self.q, self.winv))
         # the numpy twin's work arrays, made when first needed (the kernel has its own)
         self._work_band: FloatArray | None = None
         self._trace_work: _banded.InverseTrace | None = None
-        self.kernel = native.load(KERNEL)
         self.factorial2 = float(math.factorial(m) ** 2)
         # p where the fit goes from near-interpolation (spline wavelength ~ the median
         # sample spacing) to the polynomial (wavelength ~ the record): the search range
