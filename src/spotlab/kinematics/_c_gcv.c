@@ -204,7 +204,8 @@ INLINE double trace_bw(const Problem *P, const double *ab, const int bw)
             win[a][b] = 0.0;
         }
     }
-    double acc = 0.0;
+    /* the terms of the trace summed with Neumaier's compensation (n - trace cancels) */
+    double acc = 0.0, comp = 0.0;
     for (Py_ssize_t i = n - 1; i >= 0; i--) {
         for (int a = 0; a < bw; a++) {
             Py_ssize_t jj = i + 1 + a;
@@ -222,14 +223,17 @@ INLINE double trace_bw(const Problem *P, const double *ab, const int bw)
         for (int a = 0; a < bw; a++) {
             corner += c[a] * y[a];
         }
-        acc += corner * P->r[i * ld + bw];
+        double term = corner * P->r[i * ld + bw];
         for (int a = 0; a < bw; a++) {
             Py_ssize_t jj = i + 1 + a;
             if (jj < n) {
                 /* R[i, i + 1 + a] counts twice (both triangles) */
-                acc -= 2.0 * y[a] * P->r[jj * ld + bw - (a + 1)];
+                term -= 2.0 * y[a] * P->r[jj * ld + bw - (a + 1)];
             }
         }
+        const double sum = acc + term;
+        comp += fabs(acc) >= fabs(term) ? (acc - sum) + term : (term - sum) + acc;
+        acc = sum;
         next[0][0] = corner;
         for (int a = 1; a < bw; a++) {
             next[0][a] = -y[a - 1];
@@ -244,7 +248,7 @@ INLINE double trace_bw(const Problem *P, const double *ab, const int bw)
             }
         }
     }
-    return acc;
+    return acc + comp;
 }
 
 static double trace(const Problem *P, const double *ab)
