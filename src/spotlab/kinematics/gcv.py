@@ -28,8 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, optimize
-from scipy.linalg import lapack
 
 from spotlab.core import native
 from spotlab.kinematics import _banded
@@ -150,7 +148,7 @@ class PenalisedSpline:
             float(p), self.factorial2, trace,
         )  # fmt: skip
         if rdof is None:
-            raise linalg.LinAlgError("banded matrix not positive definite")
+            raise np.linalg.LinAlgError("banded matrix not positive definite")
         return fitted, rss, float(rdof)
 
     def factor(self, p: float) -> FloatArray:
@@ -163,12 +161,14 @@ class PenalisedSpline:
         numpy.linalg.LinAlgError
             When the matrix is not positive definite to working precision.
         """
+        from scipy.linalg import lapack  # the twin's: SciPy only where it runs
+
         work = self._work
         np.multiply(self.qwq, p * self.factorial2, out=work)
         work += self.r
         chol, info = lapack.dpbtrf(work, lower=0, overwrite_ab=1)
         if info != 0:
-            raise linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+            raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
         return np.asarray(chol)
 
     def traces(self, chol: FloatArray) -> FloatArray:
@@ -187,12 +187,14 @@ class PenalisedSpline:
 
         ``rhs`` is ``Q^T y`` when the caller has it (it does not depend on p).
         """
+        from scipy.linalg import lapack
+
         chol = self.factor(p)
         if rhs is None:
             rhs = _banded.qt_times(self.q, y)
         delta, info = lapack.dpbtrs(chol, rhs, lower=0)
         if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
-            raise linalg.LinAlgError(f"banded solve failed (info {info})")
+            raise np.linalg.LinAlgError(f"banded solve failed (info {info})")
         fitted = y - (p * self.factorial2) * self.winv[:, None] * _banded.q_times(self.q, delta)
         return fitted, chol
 
@@ -237,7 +239,7 @@ class _Criterion:
         for problem, y, rhs in self.parts:
             try:
                 fitted, stats = problem.statistics(10.0**log_p, y, rhs)
-            except linalg.LinAlgError:
+            except np.linalg.LinAlgError:
                 return np.inf
             rss += float(stats.msr[0]) * problem.n_eff
             rdof += problem.n_eff - stats.dof
@@ -259,6 +261,8 @@ def _scan_and_refine(
     criterion: _Criterion, lo: float, hi: float, step: float, xatol: float
 ) -> float:
     """log10 p of the smallest criterion on a grid over [lo, hi], refined by Brent."""
+    from scipy import optimize
+
     grid = np.arange(lo, hi + step, step)
     values = np.array([criterion(g) for g in grid])
     if not np.any(np.isfinite(values)):
@@ -340,6 +344,8 @@ def gcv_fit(
     if x is None or problem.n_eff <= LONG_RECORD:
         log_p = _scan_and_refine(criterion, lo, hi, step, xatol=1e-6)
     else:
+        from scipy import optimize
+
         a, b, c = _bracket(criterion, _start_value(problem, x, y), lo, hi)
         if criterion(b) < min(criterion(a), criterion(c)):
             res = optimize.minimize_scalar(criterion, bracket=(a, b, c), method="brent", tol=1e-5)
@@ -381,7 +387,7 @@ def search_native(
         problem.factorial2, 1e-6,
     )  # fmt: skip
     if failures:
-        raise linalg.LinAlgError(f"{failures} channel(s): banded matrix not positive definite")
+        raise np.linalg.LinAlgError(f"{failures} channel(s): banded matrix not positive definite")
     stats = []
     for j in range(k):
         msr = np.array([rss[j] / n])
@@ -402,6 +408,8 @@ def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
     largest p of the search range is returned, which is that polynomial to
     rounding.
     """
+    from scipy import optimize
+
     n = problem.n_eff
 
     def excess(log_p: float) -> float:
@@ -416,7 +424,7 @@ def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
         try:
             top = excess(hi)
             break
-        except linalg.LinAlgError:
+        except np.linalg.LinAlgError:
             hi -= 1.0
     if top <= 0.0:
         return float(10.0**hi)

@@ -221,3 +221,27 @@ def test_the_kernel_lets_other_threads_run() -> None:
     # with the GIL held, this thread would wait the whole call between two ticks
     assert len(ticks) > 3
     assert max(np.diff(ticks)) < 0.5 * one_call
+
+
+@pytest.mark.parametrize(("n", "k", "degree"), [(6, 1, 5), (4, 2, 3), (500, 3, 5), (300, 2, 3)])
+def test_natural_spline_equals_scipys(
+    n: int, k: int, degree: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from spotlab.kinematics._natural import natural_spline
+
+    t, y = _signals(n, k, seed=n + k)
+    points = np.sort(np.concatenate([t, np.random.default_rng(n).uniform(t[0], t[-1], 200)]))
+    twin, kernel = _twin_and_kernel(lambda: natural_spline(t, y, degree), monkeypatch)
+    for nu in range(4):
+        ref = twin(points, nu=nu)
+        assert np.max(np.abs(kernel(points, nu=nu) - ref)) <= 1e-12 * np.max(np.abs(ref)), nu
+    # a scalar point gives one value per channel; a grid keeps its shape
+    assert kernel(t[-1], nu=1).shape == (k,)
+    assert np.allclose(kernel(t[-1], nu=1), twin(t[-1], nu=1), rtol=1e-12, atol=0.0)
+    assert kernel(points[:12].reshape(3, 4)).shape == (3, 4, k)
+    # the natural end conditions: derivatives m .. 2m - 2 vanish at both ends
+    m = (degree + 1) // 2
+    for order in range(m, degree):
+        inside = np.max(np.abs(kernel(points, nu=order)))
+        ends = kernel(np.array([t[0], t[-1]]), nu=order)
+        assert np.all(np.abs(ends) <= 1e-9 * inside), order
