@@ -27,10 +27,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.polynomial.legendre import leggauss
 from numpy.typing import NDArray
 
 from spotlab.core import native
 from spotlab.kinematics import _banded
+from spotlab.kinematics._brent import bounded_brent, bracketed_brent, minimise
 
 FloatArray = NDArray[np.float64]
 
@@ -60,6 +62,19 @@ class FitStatistics:
     variance: FloatArray
 
 
+def median(values: FloatArray) -> float:
+    """``np.median`` of a finite 1-D array, its arithmetic without its NaN check.
+
+    ``np.median`` imports ``numpy.ma`` (~20 ms) on its first call for that check.
+    """
+    n = values.size
+    half = n // 2
+    if n % 2:
+        return float(np.partition(values, half)[half])
+    part = np.partition(values, [half - 1, half])
+    return float((part[half - 1] + part[half]) / 2.0)
+
+
 class PenalisedSpline:
     """Reinsch-type banded equations of the smoothing spline of order 2m at samples ``x``.
 
@@ -85,7 +100,7 @@ class PenalisedSpline:
             rows = x.size - m
             self.q = np.empty((rows, m + 1))
             qwq, r = np.empty((rows, m + 1)), np.empty((rows, m + 1))
-            nodes, weights = np.polynomial.legendre.leggauss(m)
+            nodes, weights = leggauss(m)
             self.kernel.bands(
                 np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(self.winv),
                 nodes, weights, self.q, qwq, r, m, x.size,
@@ -105,7 +120,7 @@ class PenalisedSpline:
         order = 2 * m - 1
         w_mean = float(np.mean(w))
         self.log_p_range = (
-            order * np.log10(np.median(np.diff(x))) - np.log10(w_mean) - 3.0,
+            order * np.log10(median(np.diff(x))) - np.log10(w_mean) - 3.0,
             order * np.log10(x[-1] - x[0]) - np.log10(w_mean) + 3.0,
         )
 
@@ -261,18 +276,15 @@ def _scan_and_refine(
     criterion: _Criterion, lo: float, hi: float, step: float, xatol: float
 ) -> float:
     """log10 p of the smallest criterion on a grid over [lo, hi], refined by Brent."""
-    from scipy import optimize
-
     grid = np.arange(lo, hi + step, step)
     values = np.array([criterion(g) for g in grid])
     if not np.any(np.isfinite(values)):
         return float(grid[-1])
     best = int(np.argmin(values))
     a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
-    res = optimize.minimize_scalar(
-        criterion, bounds=(a, b), method="bounded", options={"xatol": xatol}
-    )
-    return float(res.x) if res.fun <= values[best] else float(grid[best])
+    # SciPy's minimize_scalar(method="bounded") step for step (_brent)
+    x, fun = minimise(bounded_brent(float(a), float(b), xatol), criterion)
+    return x if fun <= values[best] else float(grid[best])
 
 
 #: Records longer than this are searched from a start value (see :func:`minimise_gcv`).
@@ -344,12 +356,10 @@ def gcv_fit(
     if x is None or problem.n_eff <= LONG_RECORD:
         log_p = _scan_and_refine(criterion, lo, hi, step, xatol=1e-6)
     else:
-        from scipy import optimize
-
         a, b, c = _bracket(criterion, _start_value(problem, x, y), lo, hi)
         if criterion(b) < min(criterion(a), criterion(c)):
-            res = optimize.minimize_scalar(criterion, bracket=(a, b, c), method="brent", tol=1e-5)
-            log_p = float(res.x)
+            # SciPy's minimize_scalar(method="brent", tol=1e-5) step for step (_brent)
+            log_p, _ = minimise(bracketed_brent(a, b, c, tol=1e-5), criterion)
         else:
             log_p = min((a, b, c), key=criterion)
     p = float(10.0**log_p)
