@@ -5,7 +5,8 @@
  * its Cholesky factor, the fitted values f = y - p (m!)^2 W^-1 Q delta, the weighted
  * residual sum and the trace tr(inv(A) R) by Takahashi's recursion, at one p (fit) or
  * over a whole GCV search (search: the scan over log10 p, then bounded Brent
- * refinement with the arithmetic of _brent.bounded_brent, channel by channel).
+ * refinement with the arithmetic of _brent.bounded_brent, two channels' refinements
+ * interleaved in the factor, solves and trace: each is a latency-bound chain).
  *
  * Layouts (all C-contiguous float64, checked on entry):
  *   q          (rows, m + 1)  q[j, a] multiplies f[j + a] in the j-th divided difference
@@ -76,185 +77,237 @@ typedef struct {
 
 /* ---------------------------------------------------------------- algebra */
 
+/* Up to LANES evaluations at different p run side by side in the factor, the solves and
+ * the trace: each is a chain of dependent operations (a division per column, a window
+ * per step), so two independent chains interleaved take little longer than one. Every
+ * lane's arithmetic is the one-lane arithmetic. */
+enum { LANES = 2, MAXBW = 9 };
+
+/* Calls f(args) with the number of lanes as a constant (1 or 2). */
+#define BY_LANES(lanes, call)                                                                  \
+    if ((lanes) == 1) {                                                                        \
+        const int LN = 1;                                                                      \
+        call;                                                                                  \
+    } else {                                                                                   \
+        const int LN = 2;                                                                      \
+        call;                                                                                  \
+    }
+
 /* A = qwq * (p (m!)^2) + r, factored in place as A = U^T D U, U unit upper triangular
- * (U[j, j + t] in A's slots, 1 / D[j] on the diagonal); 0 or the failing column + 1.
- * LDL^T rather than LAPACK's LL^T: no square root on the chain from column to column. */
-INLINE Py_ssize_t factor_bw(const Problem *P, double p, double *ab, const int bw)
+ * (U[j, j + t] in A's slots, 1 / D[j] on the diagonal); fail[q]: 0 or the failing
+ * column + 1 of lane q. LDL^T rather than LAPACK's LL^T: no square root on the chain
+ * from column to column. */
+INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
+                      const int lanes, const int bw)
 {
-    enum { MAXBW = 9 };
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
-    const double s = p * P->fact2;
-    /* B[r][c] = A[j + r, j + c] (r <= c <= bw) as updated by the columns before j; the
-     * entries of column j + bw are still A's own, assembled here from qwq and r. Columns
-     * past the end are zero: they neither couple nor get stored. */
-    double B[MAXBW][MAXBW], v[MAXBW], l[MAXBW];
-    /* the slots above the first columns (rows before 0) are zero: the solves read them */
-    for (Py_ssize_t j = 0; j < bw && j < n; j++) {
-        for (int t = 0; t < bw - j; t++) {
-            ab[j * ld + t] = 0.0;
-        }
-    }
-    for (int r = 0; r < bw; r++) {
-        for (int c = r; c < bw; c++) {
-            const Py_ssize_t col = c;
-            B[r][c] = col < n ? P->qwq[col * ld + bw - (c - r)] * s + P->r[col * ld + bw - (c - r)]
-                              : 0.0;
-        }
-    }
-    for (Py_ssize_t j = 0; j < n; j++) {
-        const Py_ssize_t col = j + bw;
-        for (int r = 0; r <= bw; r++) {
-            const Py_ssize_t at = col * ld + r; /* A[j + r, j + bw] */
-            B[r][bw] = col < n ? P->qwq[at] * s + P->r[at] : 0.0;
-        }
-        const double d = B[0][0];
-        if (!(d > 0.0)) {
-            return j + 1;
-        }
-        const double rd = 1.0 / d;
-        ab[j * ld + bw] = rd;
-        for (int t = 1; t <= bw; t++) {
-            v[t] = B[0][t];
-            l[t] = v[t] * rd;
-        }
-        for (int c = 1; c <= bw; c++) {
-            for (int r = 1; r <= c; r++) {
-                B[r][c] -= l[r] * v[c];
-            }
-            if (j + c < n) {
-                ab[(j + c) * ld + bw - c] = l[c];
+    double s[LANES];
+    /* B[q][r][c] = A[j + r, j + c] (r <= c <= bw) of lane q as updated by the columns
+     * before j; the entries of column j + bw are still A's own, assembled here from qwq
+     * and r. Columns past the end are zero: they neither couple nor get stored. */
+    double B[LANES][MAXBW][MAXBW], v[LANES][MAXBW], l[LANES][MAXBW];
+    for (int q = 0; q < lanes; q++) {
+        s[q] = p[q] * P->fact2;
+        fail[q] = 0;
+        /* the slots above the first columns (rows before 0) are zero: the solves read them */
+        for (Py_ssize_t j = 0; j < bw && j < n; j++) {
+            for (int t = 0; t < bw - j; t++) {
+                ab[q][j * ld + t] = 0.0;
             }
         }
         for (int r = 0; r < bw; r++) {
             for (int c = r; c < bw; c++) {
-                B[r][c] = B[r + 1][c + 1];
+                const Py_ssize_t at = (Py_ssize_t)c * ld + bw - (c - r);
+                B[q][r][c] = c < n ? P->qwq[at] * s[q] + P->r[at] : 0.0;
             }
         }
     }
-    return 0;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        const Py_ssize_t col = j + bw;
+        for (int q = 0; q < lanes; q++) {
+            for (int r = 0; r <= bw; r++) {
+                const Py_ssize_t at = col * ld + r; /* A[j + r, j + bw] */
+                B[q][r][bw] = col < n ? P->qwq[at] * s[q] + P->r[at] : 0.0;
+            }
+            const double d = B[q][0][0];
+            if (!(d > 0.0) && fail[q] == 0) {
+                fail[q] = j + 1; /* the lane goes on, its figures are not used */
+            }
+            const double rd = 1.0 / d;
+            ab[q][j * ld + bw] = rd;
+            for (int t = 1; t <= bw; t++) {
+                v[q][t] = B[q][0][t];
+                l[q][t] = v[q][t] * rd;
+            }
+            for (int c = 1; c <= bw; c++) {
+                for (int r = 1; r <= c; r++) {
+                    B[q][r][c] -= l[q][r] * v[q][c];
+                }
+                if (j + c < n) {
+                    ab[q][(j + c) * ld + bw - c] = l[q][c];
+                }
+            }
+            for (int r = 0; r < bw; r++) {
+                for (int c = r; c < bw; c++) {
+                    B[q][r][c] = B[q][r + 1][c + 1];
+                }
+            }
+        }
+    }
+}
+
+static void factor_lanes(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
+                         int lanes)
+{
+    BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, LN, BW)));
 }
 
 static Py_ssize_t factor(const Problem *P, double p, double *ab)
 {
-    Py_ssize_t out = 0;
-    BY_BANDWIDTH(P->m, out = factor_bw(P, p, ab, BW));
-    return out;
+    Py_ssize_t fail = 0;
+    factor_lanes(P, &p, &ab, &fail, 1);
+    return fail;
 }
 
-/* delta = inv(U^T D U) rhs: U^T z = rhs forward, then U delta = D^-1 z backward. */
-INLINE void solve_bw(const Problem *P, const double *ab, const double *rhs, double *x,
-                     const int bw)
+/* x[q] = inv(U^T D U) rhs[q]: U^T z = rhs forward, then U x = D^-1 z backward. */
+INLINE void solve_bw(const Problem *P, const double *const *ab, const double *const *rhs,
+                     double *const *x, const int lanes, const int bw)
 {
-    enum { MAXBW = 9 };
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
-    /* z[a] = the solution at j - bw + a, kept in registers (zero before the start) */
-    double z[MAXBW];
-    for (int a = 0; a < bw; a++) {
-        z[a] = 0.0;
+    /* z[q][a] = lane q's solution at j - bw + a, kept in registers (zero before the start) */
+    double z[LANES][MAXBW];
+    for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            z[q][a] = 0.0;
+        }
     }
     for (Py_ssize_t j = 0; j < n; j++) {
-        double temp = rhs[j];
-        for (int a = 0; a < bw; a++) { /* x[j - 1] last: the shortest chain */
-            temp -= ab[j * ld + a] * z[a];
+        for (int q = 0; q < lanes; q++) {
+            double temp = rhs[q][j];
+            for (int a = 0; a < bw; a++) { /* x[j - 1] last: the shortest chain */
+                temp -= ab[q][j * ld + a] * z[q][a];
+            }
+            for (int a = 0; a + 1 < bw; a++) {
+                z[q][a] = z[q][a + 1];
+            }
+            z[q][bw - 1] = temp;
+            x[q][j] = temp;
         }
-        for (int a = 0; a + 1 < bw; a++) {
-            z[a] = z[a + 1];
-        }
-        z[bw - 1] = temp;
-        x[j] = temp;
     }
-    /* backward: z[a] = delta at j + 1 + a (zero past the end) */
-    for (int a = 0; a < bw; a++) {
-        z[a] = 0.0;
+    /* backward: z[q][a] = the solution at j + 1 + a (zero past the end) */
+    for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            z[q][a] = 0.0;
+        }
     }
     for (Py_ssize_t j = n - 1; j >= 0; j--) {
-        double temp = x[j] * ab[j * ld + bw];
-        for (int a = bw - 1; a >= 0; a--) { /* delta[j + 1] last */
-            const Py_ssize_t i = j + 1 + a;
-            if (i < n) {
-                temp -= ab[i * ld + bw - (a + 1)] * z[a];
+        for (int q = 0; q < lanes; q++) {
+            double temp = x[q][j] * ab[q][j * ld + bw];
+            for (int a = bw - 1; a >= 0; a--) { /* x[j + 1] last */
+                const Py_ssize_t i = j + 1 + a;
+                if (i < n) {
+                    temp -= ab[q][i * ld + bw - (a + 1)] * z[q][a];
+                }
             }
+            for (int a = bw - 1; a > 0; a--) {
+                z[q][a] = z[q][a - 1];
+            }
+            z[q][0] = temp;
+            x[q][j] = temp;
         }
-        for (int a = bw - 1; a > 0; a--) {
-            z[a] = z[a - 1];
-        }
-        z[0] = temp;
-        x[j] = temp;
     }
+}
+
+static void solve_lanes(const Problem *P, const double *const *ab, const double *const *rhs,
+                        double *const *x, int lanes)
+{
+    BY_LANES(lanes, BY_BANDWIDTH(P->m, solve_bw(P, ab, rhs, x, LN, BW)));
 }
 
 static void solve(const Problem *P, const double *ab, const double *rhs, double *x)
 {
-    BY_BANDWIDTH(P->m, solve_bw(P, ab, rhs, x, BW));
+    solve_lanes(P, &ab, &rhs, &x, 1);
 }
 
 /* tr(inv(A) R) from A = U^T D U, by Takahashi's backward recursion over a bw x bw window
  * X of inv(A): row i of the inverse is -X c beyond the diagonal (c = U[i, i + 1 ..]) and
  * 1 / D[i] + c . X c on it (Hutchinson & de Hoog 1985). */
-INLINE double trace_bw(const Problem *P, const double *ab, const int bw)
+INLINE void trace_bw(const Problem *P, const double *const *ab, double *out, const int lanes,
+                     const int bw)
 {
-    enum { MAXBW = 9 };
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
-    double win[MAXBW][MAXBW], next[MAXBW][MAXBW], c[MAXBW], y[MAXBW];
-    for (int a = 0; a < bw; a++) {
-        for (int b = 0; b < bw; b++) {
-            win[a][b] = 0.0;
-        }
-    }
+    double win[LANES][MAXBW][MAXBW], next[MAXBW][MAXBW], c[MAXBW], y[MAXBW];
     /* the terms of the trace summed with Neumaier's compensation (n - trace cancels) */
-    double acc = 0.0, comp = 0.0;
-    for (Py_ssize_t i = n - 1; i >= 0; i--) {
-        for (int a = 0; a < bw; a++) {
-            Py_ssize_t jj = i + 1 + a;
-            c[a] = jj < n ? ab[jj * ld + bw - (a + 1)] : 0.0;
-        }
-        /* y = X c: minus row i of the inverse beyond the diagonal */
-        for (int a = 0; a < bw; a++) {
-            double s = 0.0;
-            for (int b = 0; b < bw; b++) {
-                s += win[a][b] * c[b];
-            }
-            y[a] = s;
-        }
-        double corner = ab[i * ld + bw];
-        for (int a = 0; a < bw; a++) {
-            corner += c[a] * y[a];
-        }
-        double term = corner * P->r[i * ld + bw];
-        for (int a = 0; a < bw; a++) {
-            Py_ssize_t jj = i + 1 + a;
-            if (jj < n) {
-                /* R[i, i + 1 + a] counts twice (both triangles) */
-                term -= 2.0 * y[a] * P->r[jj * ld + bw - (a + 1)];
-            }
-        }
-        const double sum = acc + term;
-        comp += fabs(acc) >= fabs(term) ? (acc - sum) + term : (term - sum) + acc;
-        acc = sum;
-        next[0][0] = corner;
-        for (int a = 1; a < bw; a++) {
-            next[0][a] = -y[a - 1];
-            next[a][0] = -y[a - 1];
-            for (int b = 1; b < bw; b++) {
-                next[a][b] = win[a - 1][b - 1];
-            }
-        }
+    double acc[LANES], comp[LANES];
+    for (int q = 0; q < lanes; q++) {
+        acc[q] = comp[q] = 0.0;
         for (int a = 0; a < bw; a++) {
             for (int b = 0; b < bw; b++) {
-                win[a][b] = next[a][b];
+                win[q][a][b] = 0.0;
             }
         }
     }
-    return acc + comp;
+    for (Py_ssize_t i = n - 1; i >= 0; i--) {
+        for (int q = 0; q < lanes; q++) {
+            for (int a = 0; a < bw; a++) {
+                Py_ssize_t jj = i + 1 + a;
+                c[a] = jj < n ? ab[q][jj * ld + bw - (a + 1)] : 0.0;
+            }
+            /* y = X c: minus row i of the inverse beyond the diagonal */
+            for (int a = 0; a < bw; a++) {
+                double s = 0.0;
+                for (int b = 0; b < bw; b++) {
+                    s += win[q][a][b] * c[b];
+                }
+                y[a] = s;
+            }
+            double corner = ab[q][i * ld + bw];
+            for (int a = 0; a < bw; a++) {
+                corner += c[a] * y[a];
+            }
+            double term = corner * P->r[i * ld + bw];
+            for (int a = 0; a < bw; a++) {
+                Py_ssize_t jj = i + 1 + a;
+                if (jj < n) {
+                    /* R[i, i + 1 + a] counts twice (both triangles) */
+                    term -= 2.0 * y[a] * P->r[jj * ld + bw - (a + 1)];
+                }
+            }
+            const double sum = acc[q] + term;
+            comp[q] += fabs(acc[q]) >= fabs(term) ? (acc[q] - sum) + term : (term - sum) + acc[q];
+            acc[q] = sum;
+            next[0][0] = corner;
+            for (int a = 1; a < bw; a++) {
+                next[0][a] = -y[a - 1];
+                next[a][0] = -y[a - 1];
+                for (int b = 1; b < bw; b++) {
+                    next[a][b] = win[q][a - 1][b - 1];
+                }
+            }
+            for (int a = 0; a < bw; a++) {
+                for (int b = 0; b < bw; b++) {
+                    win[q][a][b] = next[a][b];
+                }
+            }
+        }
+    }
+    for (int q = 0; q < lanes; q++) {
+        out[q] = acc[q] + comp[q];
+    }
+}
+
+static void trace_lanes(const Problem *P, const double *const *ab, double *out, int lanes)
+{
+    BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, out, LN, BW)));
 }
 
 static double trace(const Problem *P, const double *ab)
 {
     double out = 0.0;
-    BY_BANDWIDTH(P->m, out = trace_bw(P, ab, BW));
+    trace_lanes(P, &ab, &out, 1);
     return out;
 }
 
@@ -400,109 +453,246 @@ static double residual_dof(const Problem *P, const double *ab)
     return rdof > DBL_MIN ? rdof : DBL_MIN;
 }
 
-/* The criterion of the loaded channel at log10 p (infinite where the factor fails). */
-static double evaluate(const Problem *P, Work *wk, double log_p)
+/* The criteria of the channels loaded in wk[0 .. lanes - 1], each at its own log10 p
+ * (infinite where the factor fails), the lanes side by side. */
+static void evaluate_lanes(const Problem *P, Work *const *wk, const double *log_p, double *f,
+                           int lanes)
 {
-    const double p = pow(10.0, log_p);
-    if (factor(P, p, wk->ab) != 0) {
-        return INFINITY;
+    double p[LANES], rdof[LANES];
+    double *ab[LANES], *delta[LANES];
+    const double *abc[LANES], *rhs[LANES];
+    Py_ssize_t fail[LANES];
+    for (int q = 0; q < lanes; q++) {
+        p[q] = pow(10.0, log_p[q]);
+        ab[q] = wk[q]->ab;
+        abc[q] = wk[q]->ab;
+        rhs[q] = wk[q]->rhs;
+        delta[q] = wk[q]->delta;
     }
-    solve(P, wk->ab, wk->rhs, wk->delta);
-    double rss = residuals(P, p, wk->col, wk->delta, NULL, 0);
-    return criterion(P, rss, residual_dof(P, wk->ab));
+    factor_lanes(P, p, ab, fail, lanes);
+    solve_lanes(P, abc, rhs, delta, lanes);
+    trace_lanes(P, abc, rdof, lanes);
+    for (int q = 0; q < lanes; q++) {
+        if (fail[q] != 0) {
+            f[q] = INFINITY;
+            continue;
+        }
+        const double rss = residuals(P, p[q], wk[q]->col, wk[q]->delta, NULL, 0);
+        double rd = (double)P->rows - rdof[q];
+        f[q] = criterion(P, rss, rd > DBL_MIN ? rd : DBL_MIN);
+    }
 }
 
 /* ------------------------------------------------------------ Brent search */
 
-/* _brent.bounded_brent (SciPy's minimize_scalar(method="bounded")), step for step. */
-static double bounded_brent(const Problem *P, Work *wk, double lo, double hi, double xatol,
-                            double *fmin)
+/* _brent.bounded_brent (SciPy's minimize_scalar(method="bounded")) as a state machine:
+ * brent_begin gives the first point, brent_step takes the value at the last point and
+ * gives the next (1) or ends the search (0: the minimiser in xf, its value in fx). */
+typedef struct {
+    double a, b, fulc, nfc, xf, rat, e, fx, ffulc, fnfc, xm, tol1, tol2, xatol, x;
+    int num;
+} Brent;
+
+static const int BRENT_MAXFUN = 500;
+
+static double brent_begin(Brent *s, double lo, double hi, double xatol)
+{
+    const double golden_c = 0.5 * (3.0 - sqrt(5.0));
+    s->a = lo;
+    s->b = hi;
+    s->xatol = xatol;
+    s->fulc = s->a + golden_c * (s->b - s->a);
+    s->nfc = s->xf = s->fulc;
+    s->rat = s->e = 0.0;
+    s->num = 0;
+    s->x = s->xf;
+    return s->x;
+}
+
+static int brent_step(Brent *s, double f)
 {
     const double sqrt_eps = sqrt(2.2e-16);
     const double golden_c = 0.5 * (3.0 - sqrt(5.0));
-    const int maxfun = 500;
-    double a = lo, b = hi;
-    double fulc = a + golden_c * (b - a);
-    double nfc = fulc, xf = fulc;
-    double rat = 0.0, e = 0.0;
-    double fx = evaluate(P, wk, xf);
-    int num = 1;
-    double ffulc = fx, fnfc = fx;
-    double xm = 0.5 * (a + b);
-    double tol1 = sqrt_eps * fabs(xf) + xatol / 3.0;
-    double tol2 = 2.0 * tol1;
-    while (fabs(xf - xm) > tol2 - 0.5 * (b - a)) {
-        int golden = 1;
-        if (fabs(e) > tol1) {
-            golden = 0;
-            double r = (xf - nfc) * (fx - ffulc);
-            double q = (xf - fulc) * (fx - fnfc);
-            double p = (xf - fulc) * q - (xf - nfc) * r;
-            q = 2.0 * (q - r);
-            if (q > 0.0) {
-                p = -p;
-            }
-            q = fabs(q);
-            r = e;
-            e = rat;
-            if (fabs(p) < fabs(0.5 * q * r) && q * (a - xf) < p && p < q * (b - xf)) {
-                rat = (p + 0.0) / q;
-                double x = xf + rat;
-                if ((x - a) < tol2 || (b - x) < tol2) {
-                    rat = (xm - xf >= 0.0) ? tol1 : -tol1;
-                }
+    if (s->num == 0) {
+        s->fx = f;
+        s->num = 1;
+        s->ffulc = s->fnfc = f;
+    } else {
+        const double x = s->x, fu = f;
+        s->num += 1;
+        if (fu <= s->fx) {
+            if (x >= s->xf) {
+                s->a = s->xf;
             } else {
-                golden = 1;
+                s->b = s->xf;
             }
-        }
-        if (golden) {
-            e = (xf >= xm) ? (a - xf) : (b - xf);
-            rat = golden_c * e;
-        }
-        double step = fabs(rat);
-        if (tol1 > step) {
-            step = tol1;
-        }
-        double x = xf + ((rat >= 0.0) ? step : -step);
-        double fu = evaluate(P, wk, x);
-        num += 1;
-        if (fu <= fx) {
-            if (x >= xf) {
-                a = xf;
-            } else {
-                b = xf;
-            }
-            fulc = nfc;
-            ffulc = fnfc;
-            nfc = xf;
-            fnfc = fx;
-            xf = x;
-            fx = fu;
+            s->fulc = s->nfc;
+            s->ffulc = s->fnfc;
+            s->nfc = s->xf;
+            s->fnfc = s->fx;
+            s->xf = x;
+            s->fx = fu;
         } else {
-            if (x < xf) {
-                a = x;
+            if (x < s->xf) {
+                s->a = x;
             } else {
-                b = x;
+                s->b = x;
             }
-            if (fu <= fnfc || nfc == xf) {
-                fulc = nfc;
-                ffulc = fnfc;
-                nfc = x;
-                fnfc = fu;
-            } else if (fu <= ffulc || fulc == xf || fulc == nfc) {
-                fulc = x;
-                ffulc = fu;
+            if (fu <= s->fnfc || s->nfc == s->xf) {
+                s->fulc = s->nfc;
+                s->ffulc = s->fnfc;
+                s->nfc = x;
+                s->fnfc = fu;
+            } else if (fu <= s->ffulc || s->fulc == s->xf || s->fulc == s->nfc) {
+                s->fulc = x;
+                s->ffulc = fu;
             }
-        }
-        xm = 0.5 * (a + b);
-        tol1 = sqrt_eps * fabs(xf) + xatol / 3.0;
-        tol2 = 2.0 * tol1;
-        if (num >= maxfun) {
-            break;
         }
     }
-    *fmin = fx;
-    return xf;
+    s->xm = 0.5 * (s->a + s->b);
+    s->tol1 = sqrt_eps * fabs(s->xf) + s->xatol / 3.0;
+    s->tol2 = 2.0 * s->tol1;
+    if (s->num > 1 && s->num >= BRENT_MAXFUN) {
+        return 0;
+    }
+    if (!(fabs(s->xf - s->xm) > s->tol2 - 0.5 * (s->b - s->a))) {
+        return 0;
+    }
+    const double xf = s->xf, fx = s->fx, tol1 = s->tol1, tol2 = s->tol2;
+    int golden = 1;
+    if (fabs(s->e) > tol1) {
+        golden = 0;
+        double r = (xf - s->nfc) * (fx - s->ffulc);
+        double q = (xf - s->fulc) * (fx - s->fnfc);
+        double p = (xf - s->fulc) * q - (xf - s->nfc) * r;
+        q = 2.0 * (q - r);
+        if (q > 0.0) {
+            p = -p;
+        }
+        q = fabs(q);
+        r = s->e;
+        s->e = s->rat;
+        if (fabs(p) < fabs(0.5 * q * r) && q * (s->a - xf) < p && p < q * (s->b - xf)) {
+            s->rat = (p + 0.0) / q;
+            const double x = xf + s->rat;
+            if ((x - s->a) < tol2 || (s->b - x) < tol2) {
+                s->rat = (s->xm - xf >= 0.0) ? tol1 : -tol1;
+            }
+        } else {
+            golden = 1;
+        }
+    }
+    if (golden) {
+        s->e = (xf >= s->xm) ? (s->a - xf) : (s->b - xf);
+        s->rat = golden_c * s->e;
+    }
+    double step = fabs(s->rat);
+    if (tol1 > step) {
+        step = tol1;
+    }
+    s->x = xf + ((s->rat >= 0.0) ? step : -step);
+    return 1;
+}
+
+/* The channels' refinements after the scan (values (g_count, k)), two at a time in the
+ * lanes, and each channel's fit at its chosen log10 p. */
+typedef struct {
+    const Problem *P;
+    const double *y, *grid, *values;
+    Py_ssize_t g_count, next;
+    double xatol;
+    double *fitted, *log_p, *rss, *rdof;
+    Py_ssize_t failures;
+} Refine;
+
+typedef struct {
+    Work *wk;
+    Py_ssize_t ch, best;
+    Brent s;
+} Lane;
+
+/* Channel ch (loaded in wk) fitted at log10 p = chosen. */
+static void finish(Refine *R, Work *wk, Py_ssize_t ch, double chosen)
+{
+    const Problem *P = R->P;
+    R->log_p[ch] = chosen;
+    const double p = pow(10.0, chosen);
+    if (factor(P, p, wk->ab) != 0) {
+        R->rss[ch] = NAN;
+        R->rdof[ch] = NAN;
+        R->failures++;
+        return;
+    }
+    solve(P, wk->ab, wk->rhs, wk->delta);
+    R->rss[ch] = residuals(P, p, wk->col, wk->delta, R->fitted + ch, P->k);
+    R->rdof[ch] = residual_dof(P, wk->ab);
+}
+
+/* The next channel with a search into the lane (0 when none is left); channels without
+ * a finite value on the grid are fitted at its end, as the twin does. */
+static int next_channel(Refine *R, Lane *lane)
+{
+    const Problem *P = R->P;
+    const Py_ssize_t k = P->k, g_count = R->g_count;
+    while (R->next < k) {
+        const Py_ssize_t ch = R->next++;
+        Py_ssize_t best = -1;
+        for (Py_ssize_t g = 0; g < g_count; g++) {
+            const double v = R->values[g * k + ch];
+            if (isfinite(v) && (best < 0 || v < R->values[best * k + ch])) {
+                best = g;
+            }
+        }
+        load_channel(P, R->y, ch, lane->wk);
+        if (best < 0) {
+            finish(R, lane->wk, ch, R->grid[g_count - 1]);
+            continue;
+        }
+        lane->ch = ch;
+        lane->best = best;
+        const double lo = R->grid[best > 0 ? best - 1 : 0];
+        const double hi = R->grid[best + 1 < g_count ? best + 1 : g_count - 1];
+        brent_begin(&lane->s, lo, hi, R->xatol);
+        return 1;
+    }
+    return 0;
+}
+
+static void refine(Refine *R, Work *wks, int lanes)
+{
+    const Py_ssize_t k = R->P->k;
+    Lane lane[LANES];
+    int active[LANES];
+    for (int q = 0; q < lanes; q++) {
+        lane[q].wk = &wks[q];
+        active[q] = next_channel(R, &lane[q]);
+    }
+    for (;;) {
+        Work *wk[LANES];
+        double x[LANES], f[LANES];
+        int which[LANES], count = 0;
+        for (int q = 0; q < lanes; q++) {
+            if (active[q]) {
+                which[count] = q;
+                wk[count] = lane[q].wk;
+                x[count] = lane[q].s.x;
+                count++;
+            }
+        }
+        if (count == 0) {
+            break;
+        }
+        evaluate_lanes(R->P, wk, x, f, count);
+        for (int i = 0; i < count; i++) {
+            Lane *ln = &lane[which[i]];
+            if (brent_step(&ln->s, f[i])) {
+                continue;
+            }
+            const double bound = R->values[ln->best * k + ln->ch];
+            finish(R, ln->wk, ln->ch, ln->s.fx <= bound ? ln->s.xf : R->grid[ln->best]);
+            active[which[i]] = next_channel(R, ln);
+        }
+    }
 }
 
 /* ------------------------------------------------------------ the bands */
@@ -786,9 +976,14 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
             return NULL;
         }
     }
-    Work wk;
+    Work wk[LANES];
+    memset(wk, 0, sizeof wk);
+    const int lanes = k > 1 ? LANES : 1;
     double *values = malloc(sizeof(double) * (size_t)(g_count * k));
-    int ok = work_alloc(&P, &wk) && values != NULL;
+    int ok = values != NULL;
+    for (int q = 0; q < lanes; q++) {
+        ok = work_alloc(&P, &wk[q]) && ok;
+    }
     Py_ssize_t failures = 0;
     if (ok) {
         const double *y = views[B_Y].buf, *grid = extra[0].buf;
@@ -798,54 +993,30 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
         /* 1. the scan: one factor and one trace per grid point for all channels */
         for (Py_ssize_t g = 0; g < g_count; g++) {
             const double p = pow(10.0, grid[g]);
-            if (factor(&P, p, wk.ab) != 0) {
+            if (factor(&P, p, wk[0].ab) != 0) {
                 for (Py_ssize_t ch = 0; ch < k; ch++) {
                     values[g * k + ch] = INFINITY;
                 }
                 continue;
             }
-            const double rd = residual_dof(&P, wk.ab);
+            const double rd = residual_dof(&P, wk[0].ab);
             for (Py_ssize_t ch = 0; ch < k; ch++) {
-                load_channel(&P, y, ch, &wk);
-                solve(&P, wk.ab, wk.rhs, wk.delta);
-                double s = residuals(&P, p, wk.col, wk.delta, NULL, 0);
+                load_channel(&P, y, ch, &wk[0]);
+                solve(&P, wk[0].ab, wk[0].rhs, wk[0].delta);
+                double s = residuals(&P, p, wk[0].col, wk[0].delta, NULL, 0);
                 values[g * k + ch] = criterion(&P, s, rd);
             }
         }
-        /* 2. each channel's refinement, then its fit at the chosen p */
-        for (Py_ssize_t ch = 0; ch < k; ch++) {
-            Py_ssize_t best = -1;
-            for (Py_ssize_t g = 0; g < g_count; g++) {
-                const double v = values[g * k + ch];
-                if (isfinite(v) && (best < 0 || v < values[best * k + ch])) {
-                    best = g;
-                }
-            }
-            load_channel(&P, y, ch, &wk);
-            double chosen = grid[g_count - 1];
-            if (best >= 0) {
-                const double lo = grid[best > 0 ? best - 1 : 0];
-                const double hi = grid[best + 1 < g_count ? best + 1 : g_count - 1];
-                double fmin;
-                const double x = bounded_brent(&P, &wk, lo, hi, xatol, &fmin);
-                chosen = (fmin <= values[best * k + ch]) ? x : grid[best];
-            }
-            log_p[ch] = chosen;
-            const double p = pow(10.0, chosen);
-            if (factor(&P, p, wk.ab) != 0) {
-                rss[ch] = NAN;
-                rdof[ch] = NAN;
-                failures++;
-                continue;
-            }
-            solve(&P, wk.ab, wk.rhs, wk.delta);
-            rss[ch] = residuals(&P, p, wk.col, wk.delta, fitted + ch, k);
-            rdof[ch] = residual_dof(&P, wk.ab);
-        }
+        /* 2. each channel's refinement, two channels side by side, then its fit */
+        Refine R = {&P, y, grid, values, g_count, 0, xatol, fitted, log_p, rss, rdof, 0};
+        refine(&R, wk, lanes);
+        failures = R.failures;
         Py_END_ALLOW_THREADS;
     }
     free(values);
-    work_free(&wk);
+    for (int q = 0; q < LANES; q++) {
+        work_free(&wk[q]);
+    }
     release(extra, 4);
     release(views, B_COUNT);
     if (!ok) {
