@@ -1,4 +1,5 @@
-"""Kinematics: orientation angles, smoothing splines, error estimates; numpy and scipy only."""
+"""Kinematics: orientation angles, smoothing splines, error estimates (numpy; compiled kernels
+for the smoothing spline, with numpy/SciPy twins)."""
 
 from spotlab.kinematics.angles import (
     OrientationAngles,

@@ -27,13 +27,17 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.polynomial.legendre import leggauss
 from numpy.typing import NDArray
-from scipy import linalg, optimize
-from scipy.linalg import lapack
 
+from spotlab.core import native
 from spotlab.kinematics import _banded
+from spotlab.kinematics._brent import bounded_brent, bracketed_brent, minimise
 
 FloatArray = NDArray[np.float64]
+
+#: The compiled kernel (``_c_gcv.c``); without it the numpy code here is its twin.
+KERNEL = "spotlab.kinematics._c_gcv"
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,19 @@ class FitStatistics:
     variance: FloatArray
 
 
+def median(values: FloatArray) -> float:
+    """``np.median`` of a finite 1-D array, its arithmetic without its NaN check.
+
+    ``np.median`` imports ``numpy.ma`` (~20 ms) on its first call for that check.
+    """
+    n = values.size
+    half = n // 2
+    if n % 2:
+        return float(np.partition(values, half)[half])
+    part = np.partition(values, [half - 1, half])
+    return float((part[half - 1] + part[half]) / 2.0)
+
+
 class PenalisedSpline:
     """Reinsch-type banded equations of the smoothing spline of order 2m at samples ``x``.
 
@@ -76,21 +93,78 @@ class PenalisedSpline:
         self.w = w
         self.winv = 1.0 / w
         self.n_eff = x.size
-        self.q = _banded.divided_differences(x, m)
-        # LAPACK's band layout is column-major: keep the bands so, to factor in place
-        self.r = np.asfortranarray(_banded.bspline_gram_band(x, m))
-        self.qwq = np.asfortranarray(_banded.qwq_band(self.q, self.winv))
-        self._work = np.empty_like(self.r, order="F")
-        self._trace = _banded.InverseTrace(self.r)
+        self.kernel = native.load(KERNEL)
+        if self.kernel is not None:
+            # the kernel writes the bands column after column: their transposes are
+            # LAPACK's column-major band layout, as the twin keeps them
+            rows = x.size - m
+            self.q = np.empty((rows, m + 1))
+            qwq, r = np.empty((rows, m + 1)), np.empty((rows, m + 1))
+            nodes, weights = leggauss(m)
+            self.kernel.bands(
+                np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(self.winv),
+                nodes, weights, self.q, qwq, r, m, x.size,
+            )  # fmt: skip
+            self.r, self.qwq = r.T, qwq.T
+        else:
+            self.q = _banded.divided_differences(x, m)
+            # LAPACK's band layout is column-major: keep the bands so, to factor in place
+            self.r = np.asfortranarray(_banded.bspline_gram_band(x, m))
+            self.qwq = np.asfortranarray(_banded.qwq_band(self.q, self.winv))
+        # the numpy twin's work arrays, made when first needed (the kernel has its own)
+        self._work_band: FloatArray | None = None
+        self._trace_work: _banded.InverseTrace | None = None
         self.factorial2 = float(math.factorial(m) ** 2)
         # p where the fit goes from near-interpolation (spline wavelength ~ the median
         # sample spacing) to the polynomial (wavelength ~ the record): the search range
         order = 2 * m - 1
         w_mean = float(np.mean(w))
         self.log_p_range = (
-            order * np.log10(np.median(np.diff(x))) - np.log10(w_mean) - 3.0,
+            order * np.log10(median(np.diff(x))) - np.log10(w_mean) - 3.0,
             order * np.log10(x[-1] - x[0]) - np.log10(w_mean) + 3.0,
         )
+
+    @property
+    def _work(self) -> FloatArray:
+        if self._work_band is None:
+            self._work_band = np.empty_like(self.r, order="F")
+        return self._work_band
+
+    @property
+    def _trace(self) -> _banded.InverseTrace:
+        if self._trace_work is None:
+            self._trace_work = _banded.InverseTrace(self.r)
+        return self._trace_work
+
+    def kernel_arrays(self) -> tuple[FloatArray, ...]:
+        """q, r, qwq, w, 1/w as the kernel reads them (C-contiguous views, no copies)."""
+        # the bands are column-major (m + 1, N - m): their transposes are C-contiguous
+        return self.q, self.r.T, self.qwq.T, self.w, self.winv
+
+    def fit(
+        self, p: float, y: FloatArray, trace: bool = True
+    ) -> tuple[FloatArray, FloatArray, float]:
+        """Fitted values (N, K), ``sum(w r^2)`` (K,) and ``n - dof`` at p, by the kernel.
+
+        ``n - dof`` is floored at the smallest normal float as in :meth:`statistics`, and
+        is 0.0 when ``trace`` is False (not computed). Only with the kernel loaded.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            When the banded matrix is not positive definite to working precision.
+        """
+        assert self.kernel is not None, "the compiled kernel is not loaded"
+        y = np.ascontiguousarray(y, dtype=np.float64)
+        fitted = np.empty_like(y)
+        rss = np.empty(y.shape[1])
+        rdof = self.kernel.fit(
+            *self.kernel_arrays(), y, fitted, rss, self.m, y.shape[0], y.shape[1],
+            float(p), self.factorial2, trace,
+        )  # fmt: skip
+        if rdof is None:
+            raise np.linalg.LinAlgError("banded matrix not positive definite")
+        return fitted, rss, float(rdof)
 
     def factor(self, p: float) -> FloatArray:
         """Upper banded Cholesky factor of ``R + p (m!)^2 Q^T W^-1 Q``, shape (m + 1, N - m).
@@ -102,11 +176,14 @@ class PenalisedSpline:
         numpy.linalg.LinAlgError
             When the matrix is not positive definite to working precision.
         """
-        np.multiply(self.qwq, p * self.factorial2, out=self._work)
-        self._work += self.r
-        chol, info = lapack.dpbtrf(self._work, lower=0, overwrite_ab=1)
+        from scipy.linalg import lapack  # the twin's: SciPy only where it runs
+
+        work = self._work
+        np.multiply(self.qwq, p * self.factorial2, out=work)
+        work += self.r
+        chol, info = lapack.dpbtrf(work, lower=0, overwrite_ab=1)
         if info != 0:
-            raise linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+            raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
         return np.asarray(chol)
 
     def traces(self, chol: FloatArray) -> FloatArray:
@@ -125,12 +202,14 @@ class PenalisedSpline:
 
         ``rhs`` is ``Q^T y`` when the caller has it (it does not depend on p).
         """
+        from scipy.linalg import lapack
+
         chol = self.factor(p)
         if rhs is None:
             rhs = _banded.qt_times(self.q, y)
         delta, info = lapack.dpbtrs(chol, rhs, lower=0)
         if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
-            raise linalg.LinAlgError(f"banded solve failed (info {info})")
+            raise np.linalg.LinAlgError(f"banded solve failed (info {info})")
         fitted = y - (p * self.factorial2) * self.winv[:, None] * _banded.q_times(self.q, delta)
         return fitted, chol
 
@@ -138,13 +217,17 @@ class PenalisedSpline:
         self, p: float, y: FloatArray, rhs: FloatArray | None = None
     ) -> tuple[FloatArray, FitStatistics]:
         """Fitted values and fit figures at smoothing parameter p."""
-        fitted, chol = self.solve(p, y, rhs)
         n = self.n_eff
-        msr = (self.w[:, None] * (y - fitted) ** 2).sum(axis=0) / n
-        # tr(I - A) = p (m!)^2 tr(Sigma Q^T W^-1 Q) = tr(Sigma (M - R)) = (N - m) - tr(Sigma R):
-        # only Sigma's band is needed, and no large divided differences enter
-        rdof = self.r.shape[1] - self._trace(chol)
-        rdof = max(rdof, np.finfo(float).tiny)
+        if self.kernel is not None:
+            fitted, rss, rdof = self.fit(p, y)
+            msr = rss / n
+        else:
+            fitted, chol = self.solve(p, y, rhs)
+            msr = (self.w[:, None] * (y - fitted) ** 2).sum(axis=0) / n
+            # tr(I - A) = p (m!)^2 tr(Sigma Q^T W^-1 Q) = tr(Sigma (M - R)) = (N - m) -
+            # tr(Sigma R): only Sigma's band is needed, and no large divided differences enter
+            rdof = self.r.shape[1] - self._trace(chol)
+            rdof = max(rdof, np.finfo(float).tiny)
         gcv = msr / (rdof / n) ** 2
         return fitted, FitStatistics(msr=msr, dof=n - rdof, gcv=gcv, variance=msr * n / rdof)
 
@@ -171,7 +254,7 @@ class _Criterion:
         for problem, y, rhs in self.parts:
             try:
                 fitted, stats = problem.statistics(10.0**log_p, y, rhs)
-            except linalg.LinAlgError:
+            except np.linalg.LinAlgError:
                 return np.inf
             rss += float(stats.msr[0]) * problem.n_eff
             rdof += problem.n_eff - stats.dof
@@ -199,10 +282,9 @@ def _scan_and_refine(
         return float(grid[-1])
     best = int(np.argmin(values))
     a, b = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
-    res = optimize.minimize_scalar(
-        criterion, bounds=(a, b), method="bounded", options={"xatol": xatol}
-    )
-    return float(res.x) if res.fun <= values[best] else float(grid[best])
+    # SciPy's minimize_scalar(method="bounded") step for step (_brent)
+    x, fun = minimise(bounded_brent(float(a), float(b), xatol), criterion)
+    return x if fun <= values[best] else float(grid[best])
 
 
 #: Records longer than this are searched from a start value (see :func:`minimise_gcv`).
@@ -266,6 +348,9 @@ def gcv_fit(
     whole), so a few full-size evaluations suffice. The walk finds the local
     minimum nearest to that start.
     """
+    if problem.kernel is not None and (x is None or problem.n_eff <= LONG_RECORD):
+        ps, fitted, each = search_native(problem, y, step)
+        return float(ps[0]), fitted, each[0]
     criterion = _Criterion([(problem, y)])
     lo, hi = problem.log_p_range
     if x is None or problem.n_eff <= LONG_RECORD:
@@ -273,8 +358,8 @@ def gcv_fit(
     else:
         a, b, c = _bracket(criterion, _start_value(problem, x, y), lo, hi)
         if criterion(b) < min(criterion(a), criterion(c)):
-            res = optimize.minimize_scalar(criterion, bracket=(a, b, c), method="brent", tol=1e-5)
-            log_p = float(res.x)
+            # SciPy's minimize_scalar(method="brent", tol=1e-5) step for step (_brent)
+            log_p, _ = minimise(bracketed_brent(a, b, c, tol=1e-5), criterion)
         else:
             log_p = min((a, b, c), key=criterion)
     p = float(10.0**log_p)
@@ -285,6 +370,46 @@ def gcv_fit(
     return p, fitted, stats
 
 
+def search_native(
+    problem: PenalisedSpline, y: FloatArray, step: float = 2.0
+) -> tuple[FloatArray, FloatArray, list[FitStatistics]]:
+    """The scan-and-refine search of :func:`gcv_fit` for every channel of y (N, K), compiled.
+
+    One kernel call: the scan's factors and traces are shared by the channels, the
+    Brent refinements (:func:`~spotlab.kinematics._brent.bounded_brent`'s arithmetic)
+    run channel by channel. Returns p (K,), the fitted values (N, K) and each channel's
+    figures, as :func:`~spotlab.kinematics.gcv_batch.gcv_fit_many` does.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When the banded matrix at a channel's chosen p is not positive definite.
+    """
+    assert problem.kernel is not None, "the compiled kernel is not loaded"
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    n, k = y.shape
+    lo, hi = problem.log_p_range
+    grid = np.arange(lo, hi + step, step)
+    fitted = np.empty_like(y)
+    log_p, rss, rdof = np.empty(k), np.empty(k), np.empty(k)
+    failures = problem.kernel.search(
+        *problem.kernel_arrays(), y, fitted, grid, log_p, rss, rdof, problem.m, n, k,
+        problem.factorial2, 1e-6,
+    )  # fmt: skip
+    if failures:
+        raise np.linalg.LinAlgError(f"{failures} channel(s): banded matrix not positive definite")
+    stats = []
+    for j in range(k):
+        msr = np.array([rss[j] / n])
+        stats.append(
+            FitStatistics(
+                msr=msr, dof=n - rdof[j], gcv=msr / (rdof[j] / n) ** 2, variance=msr * n / rdof[j]
+            )
+        )
+    # p as Python floats, like the numpy search (numpy's power may differ in the last bit)
+    return np.array([10.0 ** float(v) for v in log_p]), fitted, stats
+
+
 def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
     """Smoothing parameter with ``sum(w r^2) = N`` (Wood & Jennings 1979) for one channel.
 
@@ -293,9 +418,13 @@ def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
     largest p of the search range is returned, which is that polynomial to
     rounding.
     """
+    from scipy import optimize
+
     n = problem.n_eff
 
     def excess(log_p: float) -> float:
+        if problem.kernel is not None:
+            return float(problem.fit(10.0**log_p, y, trace=False)[1].sum() / n - 1.0)
         fitted, _ = problem.solve(10.0**log_p, y)
         return float((problem.w[:, None] * (y - fitted) ** 2).sum() / n - 1.0)
 
@@ -305,7 +434,7 @@ def solve_wood_jennings(problem: PenalisedSpline, y: FloatArray) -> float:
         try:
             top = excess(hi)
             break
-        except linalg.LinAlgError:
+        except np.linalg.LinAlgError:
             hi -= 1.0
     if top <= 0.0:
         return float(10.0**hi)

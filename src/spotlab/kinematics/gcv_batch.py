@@ -29,12 +29,16 @@ from collections.abc import Callable, Generator
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg
-from scipy.linalg import lapack
 
 from spotlab.kinematics import _banded
 from spotlab.kinematics._brent import bounded_brent
-from spotlab.kinematics.gcv import LONG_RECORD, FitStatistics, PenalisedSpline, gcv_fit
+from spotlab.kinematics.gcv import (
+    LONG_RECORD,
+    FitStatistics,
+    PenalisedSpline,
+    gcv_fit,
+    search_native,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -58,9 +62,11 @@ def _fits(
     problem: PenalisedSpline, p: float, chol: FloatArray, y: FloatArray, rhs: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Fitted values (N, K) and ``sum(w r^2)`` (K,) for the columns of y at one factor."""
+    from scipy.linalg import lapack  # SciPy only where the twin runs
+
     delta, info = lapack.dpbtrs(chol, rhs, lower=0)
     if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
-        raise linalg.LinAlgError(f"banded solve failed (info {info})")
+        raise np.linalg.LinAlgError(f"banded solve failed (info {info})")
     fitted = y - (p * problem.factorial2) * problem.winv[:, None] * _banded.q_times(
         problem.q, delta
     )
@@ -113,7 +119,7 @@ class _Channels:
         for g, log_p in enumerate(grid):
             try:
                 chols.append(np.array(problem.factor(10.0 ** float(log_p))))
-            except linalg.LinAlgError:
+            except np.linalg.LinAlgError:
                 continue
             rows.append(g)
         if not chols:
@@ -130,6 +136,8 @@ class _Channels:
 
     def evaluate(self, points: dict[int, float]) -> dict[int, float]:
         """Criterion of channel k at ``log10 p = points[k]``, each at its own p."""
+        from scipy.linalg import lapack
+
         problem, n = self.problem, self.problem.n_eff
         out = dict.fromkeys(points, float(np.inf))
         # channels asking for the same p (the first Brent point of a shared bracket) share
@@ -147,14 +155,14 @@ class _Channels:
         for log_p, members in sharing.items():
             try:
                 chol = problem.factor(10.0**log_p)
-            except linalg.LinAlgError:
+            except np.linalg.LinAlgError:
                 continue
             # the trace keeps what it needs: the next factor overwrites this one
             trace.load(factors, chol)
             for k in members:
                 solved, info = lapack.dpbtrs(chol, self.rhs[:, k : k + 1], lower=0)
                 if info != 0:  # pragma: no cover - dpbtrs fails only on bad arguments
-                    raise linalg.LinAlgError(f"banded solve failed (info {info})")
+                    raise np.linalg.LinAlgError(f"banded solve failed (info {info})")
                 delta[:, len(ks)] = solved[:, 0]
                 which.append(factors)
                 ks.append(k)
@@ -243,6 +251,8 @@ def gcv_fit_many(
             cols.append(fitted[:, 0])
             stats.append(st)
         return np.array(ps), np.stack(cols, axis=1), stats
+    if problem.kernel is not None:
+        return search_native(problem, y, step)
     channels = _Channels(problem, y)
     lo, hi = problem.log_p_range
     grid = np.arange(lo, hi + step, step)

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import BSpline, make_interp_spline
 
+from spotlab.kinematics._natural import Spline, natural_spline
 from spotlab.kinematics.errors import KinematicsError
 from spotlab.kinematics.gcv import FitStatistics, PenalisedSpline, solve_wood_jennings
 from spotlab.kinematics.gcv_batch import gcv_fit_many
@@ -155,7 +155,7 @@ class SmoothingSpline:
         self._t0, self._t1 = float(tt[0]), float(tt[-1])
         k_all = yy.shape[1]
         ps, gcvs, msrs, dofs, variances = (np.zeros(k_all) for _ in range(5))
-        self._fits: list[tuple[BSpline, NDArray[np.intp]]] = []
+        self._fits: list[tuple[Spline, NDArray[np.intp]]] = []
         # channels missing the same samples share their knots, weights and banded matrix
         groups: dict[bytes, list[int]] = {}
         for j, key in enumerate(np.packbits(missing, axis=0).T):
@@ -178,8 +178,7 @@ class SmoothingSpline:
                 gcvs[col], msrs[col] = float(stats[j].gcv[0]), float(stats[j].msr[0])
                 dofs[col], variances[col] = stats[j].dof, float(stats[j].variance[0])
             del problem  # its bands are as large as the data: not kept while interpolating
-            natural = self._natural(x, fitted_cols, degree)
-            self._fits.append((BSpline.construct_fast(*natural), cols))
+            self._fits.append((natural_spline(x, fitted_cols, degree), cols))
         self._k = k_all
         self.p = self._pack(ps)
         self.gcv = self._pack(gcvs)
@@ -222,14 +221,6 @@ class SmoothingSpline:
         ps = np.full(y.shape[1], values[0]) if p is not None else np.array(values)
         return ps, np.concatenate(fitted, axis=1), stats
 
-    @staticmethod
-    def _natural(x: FloatArray, f: FloatArray, degree: int) -> tuple[FloatArray, FloatArray, int]:
-        """Knots, coefficients, degree of the natural spline through (x, f)."""
-        m = (degree + 1) // 2
-        ends = [(order, np.zeros(f.shape[1:])) for order in range(m, degree)]
-        interp = make_interp_spline(x, f, k=degree, bc_type=(ends, ends))
-        return interp.t, interp.c, degree
-
     def _pack(self, values: FloatArray) -> float | FloatArray:
         return float(values[0]) if self._vector else np.array(values, dtype=np.float64)
 
@@ -257,7 +248,7 @@ class SmoothingSpline:
             out[..., cols] = self._evaluate(fit, tt, nu)
         return out[..., 0] if self._vector else out
 
-    def _evaluate(self, fit: BSpline, t: FloatArray, nu: int) -> FloatArray:
+    def _evaluate(self, fit: Spline, t: FloatArray, nu: int) -> FloatArray:
         """Values (..., K_group) of one group's vector-valued spline."""
         out = np.asarray(fit(np.clip(t, self._t0, self._t1), nu=nu), dtype=np.float64)
         # outside [t_1, t_N] the natural spline is the Taylor polynomial of degree m - 1

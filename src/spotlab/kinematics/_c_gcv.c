@@ -1,0 +1,1082 @@
+/* Compiled kernel of the GCV smoothing spline (numpy twin: gcv.py, gcv_batch.py,
+ * _takahashi.py, _brent.py).
+ *
+ * Reinsch's banded system (R + p (m!)^2 Q^T W^-1 Q) delta = Q^T y of half-bandwidth m,
+ * its Cholesky factor, the fitted values f = y - p (m!)^2 W^-1 Q delta, the weighted
+ * residual sum and the trace tr(inv(A) R) by Takahashi's recursion, at one p (fit) or
+ * over a whole GCV search (search: the scan over log10 p, then bounded Brent
+ * refinement with the arithmetic of _brent.bounded_brent, two channels' refinements
+ * interleaved in the factor, solves and trace: each is a latency-bound chain).
+ *
+ * Layouts (all C-contiguous float64, checked on entry):
+ *   q          (rows, m + 1)  q[j, a] multiplies f[j + a] in the j-th divided difference
+ *   r, qwq     (rows, m + 1)  upper band by columns, as LAPACK's column-major band
+ *                             storage read column after column: [j, m - d] = A[j - d, j]
+ *   w, winv    (n,)           weights and their inverses
+ *   y, fitted  (n, k)         samples and fitted values, channels side by side
+ * with rows = n - m. The factor is A = U^T D U (U unit upper triangular; the twin uses
+ * LAPACK's A = U^T U, equal to rounding); the sums of residuals are numpy's pairwise
+ * sums. The numeric
+ * work runs without the GIL.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#if defined(__GNUC__)
+#define INLINE static inline __attribute__((always_inline))
+#else
+#define INLINE static inline
+#endif
+
+/* Calls f(args) with the half-bandwidth as a constant for m = 1 .. 4 (unrolled loops). */
+#define BY_BANDWIDTH(m, call)                                                                  \
+    switch (m) {                                                                               \
+    case 1: {                                                                                  \
+        const int BW = 1;                                                                      \
+        call;                                                                                  \
+    } break;                                                                                   \
+    case 2: {                                                                                  \
+        const int BW = 2;                                                                      \
+        call;                                                                                  \
+    } break;                                                                                   \
+    case 3: {                                                                                  \
+        const int BW = 3;                                                                      \
+        call;                                                                                  \
+    } break;                                                                                   \
+    case 4: {                                                                                  \
+        const int BW = 4;                                                                      \
+        call;                                                                                  \
+    } break;                                                                                   \
+    default: {                                                                                 \
+        const int BW = m;                                                                      \
+        call;                                                                                  \
+    } break;                                                                                   \
+    }
+
+typedef struct {
+    Py_ssize_t n;    /* samples */
+    Py_ssize_t rows; /* n - m */
+    Py_ssize_t k;    /* channels */
+    int m;           /* half-bandwidth */
+    const double *q, *r, *qwq, *w, *winv;
+    double fact2; /* (m!)^2 */
+} Problem;
+
+typedef struct {
+    double *ab;    /* (rows, m + 1) the factor */
+    const double *col; /* (n,) one channel's samples: y or buffer */
+    double *buffer;    /* (n,) a channel of several, or NULL for one */
+    double *rhs;   /* (rows,) Q^T y of that channel */
+    double *delta; /* (rows,) the solution */
+} Work;
+
+/* ---------------------------------------------------------------- algebra */
+
+/* Up to LANES evaluations at different p run side by side in the factor, the solves and
+ * the trace: each is a chain of dependent operations (a division per column, a window
+ * per step), so two independent chains interleaved take little longer than one. Every
+ * lane's arithmetic is the one-lane arithmetic. */
+enum { LANES = 2, MAXBW = 9 };
+
+/* Calls f(args) with the number of lanes as a constant (1 or 2). */
+#define BY_LANES(lanes, call)                                                                  \
+    if ((lanes) == 1) {                                                                        \
+        const int LN = 1;                                                                      \
+        call;                                                                                  \
+    } else {                                                                                   \
+        const int LN = 2;                                                                      \
+        call;                                                                                  \
+    }
+
+/* A = qwq * (p (m!)^2) + r, factored in place as A = U^T D U, U unit upper triangular
+ * (U[j, j + t] in A's slots, 1 / D[j] on the diagonal); fail[q]: 0 or the failing
+ * column + 1 of lane q. LDL^T rather than LAPACK's LL^T: no square root on the chain
+ * from column to column. */
+INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
+                      const int lanes, const int bw)
+{
+    const int ld = bw + 1;
+    const Py_ssize_t n = P->rows;
+    double s[LANES];
+    /* B[q][r][c] = A[j + r, j + c] (r <= c <= bw) of lane q as updated by the columns
+     * before j; the entries of column j + bw are still A's own, assembled here from qwq
+     * and r. Columns past the end are zero: they neither couple nor get stored. */
+    double B[LANES][MAXBW][MAXBW], v[LANES][MAXBW], l[LANES][MAXBW];
+    for (int q = 0; q < lanes; q++) {
+        s[q] = p[q] * P->fact2;
+        fail[q] = 0;
+        /* the slots above the first columns (rows before 0) are zero: the solves read them */
+        for (Py_ssize_t j = 0; j < bw && j < n; j++) {
+            for (int t = 0; t < bw - j; t++) {
+                ab[q][j * ld + t] = 0.0;
+            }
+        }
+        for (int r = 0; r < bw; r++) {
+            for (int c = r; c < bw; c++) {
+                const Py_ssize_t at = (Py_ssize_t)c * ld + bw - (c - r);
+                B[q][r][c] = c < n ? P->qwq[at] * s[q] + P->r[at] : 0.0;
+            }
+        }
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        const Py_ssize_t col = j + bw;
+        for (int q = 0; q < lanes; q++) {
+            for (int r = 0; r <= bw; r++) {
+                const Py_ssize_t at = col * ld + r; /* A[j + r, j + bw] */
+                B[q][r][bw] = col < n ? P->qwq[at] * s[q] + P->r[at] : 0.0;
+            }
+            const double d = B[q][0][0];
+            if (!(d > 0.0) && fail[q] == 0) {
+                fail[q] = j + 1; /* the lane goes on, its figures are not used */
+            }
+            const double rd = 1.0 / d;
+            ab[q][j * ld + bw] = rd;
+            for (int t = 1; t <= bw; t++) {
+                v[q][t] = B[q][0][t];
+                l[q][t] = v[q][t] * rd;
+            }
+            for (int c = 1; c <= bw; c++) {
+                for (int r = 1; r <= c; r++) {
+                    B[q][r][c] -= l[q][r] * v[q][c];
+                }
+                if (j + c < n) {
+                    ab[q][(j + c) * ld + bw - c] = l[q][c];
+                }
+            }
+            for (int r = 0; r < bw; r++) {
+                for (int c = r; c < bw; c++) {
+                    B[q][r][c] = B[q][r + 1][c + 1];
+                }
+            }
+        }
+    }
+}
+
+static void factor_lanes(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
+                         int lanes)
+{
+    BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, LN, BW)));
+}
+
+static Py_ssize_t factor(const Problem *P, double p, double *ab)
+{
+    Py_ssize_t fail = 0;
+    factor_lanes(P, &p, &ab, &fail, 1);
+    return fail;
+}
+
+/* x[q] = inv(U^T D U) rhs[q]: U^T z = rhs forward, then U x = D^-1 z backward. */
+INLINE void solve_bw(const Problem *P, const double *const *ab, const double *const *rhs,
+                     double *const *x, const int lanes, const int bw)
+{
+    const int ld = bw + 1;
+    const Py_ssize_t n = P->rows;
+    /* z[q][a] = lane q's solution at j - bw + a, kept in registers (zero before the start) */
+    double z[LANES][MAXBW];
+    for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            z[q][a] = 0.0;
+        }
+    }
+    for (Py_ssize_t j = 0; j < n; j++) {
+        for (int q = 0; q < lanes; q++) {
+            double temp = rhs[q][j];
+            for (int a = 0; a < bw; a++) { /* x[j - 1] last: the shortest chain */
+                temp -= ab[q][j * ld + a] * z[q][a];
+            }
+            for (int a = 0; a + 1 < bw; a++) {
+                z[q][a] = z[q][a + 1];
+            }
+            z[q][bw - 1] = temp;
+            x[q][j] = temp;
+        }
+    }
+    /* backward: z[q][a] = the solution at j + 1 + a (zero past the end) */
+    for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            z[q][a] = 0.0;
+        }
+    }
+    for (Py_ssize_t j = n - 1; j >= 0; j--) {
+        for (int q = 0; q < lanes; q++) {
+            double temp = x[q][j] * ab[q][j * ld + bw];
+            for (int a = bw - 1; a >= 0; a--) { /* x[j + 1] last */
+                const Py_ssize_t i = j + 1 + a;
+                if (i < n) {
+                    temp -= ab[q][i * ld + bw - (a + 1)] * z[q][a];
+                }
+            }
+            for (int a = bw - 1; a > 0; a--) {
+                z[q][a] = z[q][a - 1];
+            }
+            z[q][0] = temp;
+            x[q][j] = temp;
+        }
+    }
+}
+
+static void solve_lanes(const Problem *P, const double *const *ab, const double *const *rhs,
+                        double *const *x, int lanes)
+{
+    BY_LANES(lanes, BY_BANDWIDTH(P->m, solve_bw(P, ab, rhs, x, LN, BW)));
+}
+
+static void solve(const Problem *P, const double *ab, const double *rhs, double *x)
+{
+    solve_lanes(P, &ab, &rhs, &x, 1);
+}
+
+/* tr(inv(A) R) from A = U^T D U, by Takahashi's backward recursion over a bw x bw window
+ * X of inv(A): row i of the inverse is -X c beyond the diagonal (c = U[i, i + 1 ..]) and
+ * 1 / D[i] + c . X c on it (Hutchinson & de Hoog 1985). */
+INLINE void trace_bw(const Problem *P, const double *const *ab, double *out, const int lanes,
+                     const int bw)
+{
+    const int ld = bw + 1;
+    const Py_ssize_t n = P->rows;
+    double win[LANES][MAXBW][MAXBW], next[MAXBW][MAXBW], c[MAXBW], y[MAXBW];
+    /* the terms of the trace summed with Neumaier's compensation (n - trace cancels) */
+    double acc[LANES], comp[LANES];
+    for (int q = 0; q < lanes; q++) {
+        acc[q] = comp[q] = 0.0;
+        for (int a = 0; a < bw; a++) {
+            for (int b = 0; b < bw; b++) {
+                win[q][a][b] = 0.0;
+            }
+        }
+    }
+    for (Py_ssize_t i = n - 1; i >= 0; i--) {
+        for (int q = 0; q < lanes; q++) {
+            for (int a = 0; a < bw; a++) {
+                Py_ssize_t jj = i + 1 + a;
+                c[a] = jj < n ? ab[q][jj * ld + bw - (a + 1)] : 0.0;
+            }
+            /* y = X c: minus row i of the inverse beyond the diagonal */
+            for (int a = 0; a < bw; a++) {
+                double s = 0.0;
+                for (int b = 0; b < bw; b++) {
+                    s += win[q][a][b] * c[b];
+                }
+                y[a] = s;
+            }
+            double corner = ab[q][i * ld + bw];
+            for (int a = 0; a < bw; a++) {
+                corner += c[a] * y[a];
+            }
+            double term = corner * P->r[i * ld + bw];
+            for (int a = 0; a < bw; a++) {
+                Py_ssize_t jj = i + 1 + a;
+                if (jj < n) {
+                    /* R[i, i + 1 + a] counts twice (both triangles) */
+                    term -= 2.0 * y[a] * P->r[jj * ld + bw - (a + 1)];
+                }
+            }
+            const double sum = acc[q] + term;
+            comp[q] += fabs(acc[q]) >= fabs(term) ? (acc[q] - sum) + term : (term - sum) + acc[q];
+            acc[q] = sum;
+            next[0][0] = corner;
+            for (int a = 1; a < bw; a++) {
+                next[0][a] = -y[a - 1];
+                next[a][0] = -y[a - 1];
+                for (int b = 1; b < bw; b++) {
+                    next[a][b] = win[q][a - 1][b - 1];
+                }
+            }
+            for (int a = 0; a < bw; a++) {
+                for (int b = 0; b < bw; b++) {
+                    win[q][a][b] = next[a][b];
+                }
+            }
+        }
+    }
+    for (int q = 0; q < lanes; q++) {
+        out[q] = acc[q] + comp[q];
+    }
+}
+
+static void trace_lanes(const Problem *P, const double *const *ab, double *out, int lanes)
+{
+    BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, out, LN, BW)));
+}
+
+static double trace(const Problem *P, const double *ab)
+{
+    double out = 0.0;
+    trace_lanes(P, &ab, &out, 1);
+    return out;
+}
+
+/* numpy's pairwise summation (its order of additions for float64). */
+static double pairwise(const double *a, Py_ssize_t n)
+{
+    if (n < 8) {
+        double res = 0.0;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            res += a[i];
+        }
+        return res;
+    }
+    if (n <= 128) {
+        double r[8];
+        for (int j = 0; j < 8; j++) {
+            r[j] = a[j];
+        }
+        Py_ssize_t i;
+        for (i = 8; i < n - (n % 8); i += 8) {
+            for (int j = 0; j < 8; j++) {
+                r[j] += a[i + j];
+            }
+        }
+        double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        for (; i < n; i++) {
+            res += a[i];
+        }
+        return res;
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return pairwise(a, n2) + pairwise(a + n2, n - n2);
+}
+
+/* Q^T y for one channel. */
+static void qt_times(const Problem *P, const double *y, double *out)
+{
+    const int ld = P->m + 1;
+    for (Py_ssize_t j = 0; j < P->rows; j++) {
+        double acc = 0.0;
+        for (int a = 0; a < ld; a++) {
+            acc += P->q[j * ld + a] * y[j + a];
+        }
+        out[j] = acc;
+    }
+}
+
+/* One fit's residuals: f = y - s W^-1 Q delta (s = p (m!)^2), written to fitted (stride)
+ * if given, and the terms w (y - f)^2. */
+typedef struct {
+    const Problem *P;
+    double s;
+    const double *y, *delta;
+    double *fitted;
+    Py_ssize_t stride;
+} Residuals;
+
+/* terms[i - i0] = w_i (y_i - f_i)^2 for i in i0 .. i0 + count - 1. */
+INLINE void residual_terms_bw(const Residuals *R, Py_ssize_t i0, Py_ssize_t count,
+                              double *terms, const int bw)
+{
+    const Problem *P = R->P;
+    const int ld = bw + 1;
+    const Py_ssize_t rows = P->rows;
+    for (Py_ssize_t i = i0; i < i0 + count; i++) {
+        /* (Q delta)_i = sum over a of q[i - a, a] delta[i - a], a increasing */
+        double qd = 0.0;
+        if (i >= bw && i < rows) {
+            for (int a = 0; a < ld; a++) {
+                qd += P->q[(i - a) * ld + a] * R->delta[i - a];
+            }
+        } else {
+            for (int a = 0; a < ld; a++) {
+                Py_ssize_t j = i - a;
+                if (j >= 0 && j < rows) {
+                    qd += P->q[j * ld + a] * R->delta[j];
+                }
+            }
+        }
+        const double f = R->y[i] - (R->s * P->winv[i]) * qd;
+        const double res = R->y[i] - f;
+        terms[i - i0] = P->w[i] * (res * res);
+        if (R->fitted != NULL) {
+            R->fitted[i * R->stride] = f;
+        }
+    }
+}
+
+/* sum of the terms of i0 .. i0 + n - 1, split as numpy's pairwise sum splits an array of n. */
+static double residual_sum(const Residuals *R, Py_ssize_t i0, Py_ssize_t n)
+{
+    if (n <= 128) {
+        double terms[128];
+        BY_BANDWIDTH(R->P->m, residual_terms_bw(R, i0, n, terms, BW));
+        return pairwise(terms, n);
+    }
+    Py_ssize_t n2 = n / 2;
+    n2 -= n2 % 8;
+    return residual_sum(R, i0, n2) + residual_sum(R, i0 + n2, n - n2);
+}
+
+/* sum(w (y - f)^2) with f = y - p (m!)^2 W^-1 Q delta; f written to fitted (stride) if given. */
+static double residuals(const Problem *P, double p, const double *y, const double *delta,
+                        double *fitted, Py_ssize_t stride)
+{
+    const Residuals R = {P, p * P->fact2, y, delta, fitted, stride};
+    return residual_sum(&R, 0, P->n);
+}
+
+/* Channel ch's samples into work->col (y itself for one channel) and Q^T of them into
+ * work->rhs. */
+static void load_channel(const Problem *P, const double *y, Py_ssize_t ch, Work *wk)
+{
+    if (P->k == 1) {
+        wk->col = y;
+    } else {
+        for (Py_ssize_t i = 0; i < P->n; i++) {
+            wk->buffer[i] = y[i * P->k + ch];
+        }
+        wk->col = wk->buffer;
+    }
+    qt_times(P, wk->col, wk->rhs);
+}
+
+/* GCV of the loaded channel from sum(w r^2) and n - dof, as gcv._Criterion computes it. */
+static double criterion(const Problem *P, double rss, double rdof)
+{
+    const double n = (double)P->n;
+    rss = (rss / n) * n;
+    rdof = n - (n - rdof);
+    if (rdof < n * 1e-9) {
+        return INFINITY;
+    }
+    const double v = rdof / n;
+    return (rss / n) / (v * v);
+}
+
+/* n - dof, floored at the smallest normal number, from the factor. */
+static double residual_dof(const Problem *P, const double *ab)
+{
+    double rdof = (double)P->rows - trace(P, ab);
+    return rdof > DBL_MIN ? rdof : DBL_MIN;
+}
+
+/* The criteria of the channels loaded in wk[0 .. lanes - 1], each at its own log10 p
+ * (infinite where the factor fails), the lanes side by side. */
+static void evaluate_lanes(const Problem *P, Work *const *wk, const double *log_p, double *f,
+                           int lanes)
+{
+    double p[LANES], rdof[LANES];
+    double *ab[LANES], *delta[LANES];
+    const double *abc[LANES], *rhs[LANES];
+    Py_ssize_t fail[LANES];
+    for (int q = 0; q < lanes; q++) {
+        p[q] = pow(10.0, log_p[q]);
+        ab[q] = wk[q]->ab;
+        abc[q] = wk[q]->ab;
+        rhs[q] = wk[q]->rhs;
+        delta[q] = wk[q]->delta;
+    }
+    factor_lanes(P, p, ab, fail, lanes);
+    solve_lanes(P, abc, rhs, delta, lanes);
+    trace_lanes(P, abc, rdof, lanes);
+    for (int q = 0; q < lanes; q++) {
+        if (fail[q] != 0) {
+            f[q] = INFINITY;
+            continue;
+        }
+        const double rss = residuals(P, p[q], wk[q]->col, wk[q]->delta, NULL, 0);
+        double rd = (double)P->rows - rdof[q];
+        f[q] = criterion(P, rss, rd > DBL_MIN ? rd : DBL_MIN);
+    }
+}
+
+/* ------------------------------------------------------------ Brent search */
+
+/* _brent.bounded_brent (SciPy's minimize_scalar(method="bounded")) as a state machine:
+ * brent_begin gives the first point, brent_step takes the value at the last point and
+ * gives the next (1) or ends the search (0: the minimiser in xf, its value in fx). */
+typedef struct {
+    double a, b, fulc, nfc, xf, rat, e, fx, ffulc, fnfc, xm, tol1, tol2, xatol, x;
+    int num;
+} Brent;
+
+static const int BRENT_MAXFUN = 500;
+
+static double brent_begin(Brent *s, double lo, double hi, double xatol)
+{
+    const double golden_c = 0.5 * (3.0 - sqrt(5.0));
+    s->a = lo;
+    s->b = hi;
+    s->xatol = xatol;
+    s->fulc = s->a + golden_c * (s->b - s->a);
+    s->nfc = s->xf = s->fulc;
+    s->rat = s->e = 0.0;
+    s->num = 0;
+    s->x = s->xf;
+    return s->x;
+}
+
+static int brent_step(Brent *s, double f)
+{
+    const double sqrt_eps = sqrt(2.2e-16);
+    const double golden_c = 0.5 * (3.0 - sqrt(5.0));
+    if (s->num == 0) {
+        s->fx = f;
+        s->num = 1;
+        s->ffulc = s->fnfc = f;
+    } else {
+        const double x = s->x, fu = f;
+        s->num += 1;
+        if (fu <= s->fx) {
+            if (x >= s->xf) {
+                s->a = s->xf;
+            } else {
+                s->b = s->xf;
+            }
+            s->fulc = s->nfc;
+            s->ffulc = s->fnfc;
+            s->nfc = s->xf;
+            s->fnfc = s->fx;
+            s->xf = x;
+            s->fx = fu;
+        } else {
+            if (x < s->xf) {
+                s->a = x;
+            } else {
+                s->b = x;
+            }
+            if (fu <= s->fnfc || s->nfc == s->xf) {
+                s->fulc = s->nfc;
+                s->ffulc = s->fnfc;
+                s->nfc = x;
+                s->fnfc = fu;
+            } else if (fu <= s->ffulc || s->fulc == s->xf || s->fulc == s->nfc) {
+                s->fulc = x;
+                s->ffulc = fu;
+            }
+        }
+    }
+    s->xm = 0.5 * (s->a + s->b);
+    s->tol1 = sqrt_eps * fabs(s->xf) + s->xatol / 3.0;
+    s->tol2 = 2.0 * s->tol1;
+    if (s->num > 1 && s->num >= BRENT_MAXFUN) {
+        return 0;
+    }
+    if (!(fabs(s->xf - s->xm) > s->tol2 - 0.5 * (s->b - s->a))) {
+        return 0;
+    }
+    const double xf = s->xf, fx = s->fx, tol1 = s->tol1, tol2 = s->tol2;
+    int golden = 1;
+    if (fabs(s->e) > tol1) {
+        golden = 0;
+        double r = (xf - s->nfc) * (fx - s->ffulc);
+        double q = (xf - s->fulc) * (fx - s->fnfc);
+        double p = (xf - s->fulc) * q - (xf - s->nfc) * r;
+        q = 2.0 * (q - r);
+        if (q > 0.0) {
+            p = -p;
+        }
+        q = fabs(q);
+        r = s->e;
+        s->e = s->rat;
+        if (fabs(p) < fabs(0.5 * q * r) && q * (s->a - xf) < p && p < q * (s->b - xf)) {
+            s->rat = (p + 0.0) / q;
+            const double x = xf + s->rat;
+            if ((x - s->a) < tol2 || (s->b - x) < tol2) {
+                s->rat = (s->xm - xf >= 0.0) ? tol1 : -tol1;
+            }
+        } else {
+            golden = 1;
+        }
+    }
+    if (golden) {
+        s->e = (xf >= s->xm) ? (s->a - xf) : (s->b - xf);
+        s->rat = golden_c * s->e;
+    }
+    double step = fabs(s->rat);
+    if (tol1 > step) {
+        step = tol1;
+    }
+    s->x = xf + ((s->rat >= 0.0) ? step : -step);
+    return 1;
+}
+
+/* The channels' refinements after the scan (values (g_count, k)), two at a time in the
+ * lanes, and each channel's fit at its chosen log10 p. */
+typedef struct {
+    const Problem *P;
+    const double *y, *grid, *values;
+    Py_ssize_t g_count, next;
+    double xatol;
+    double *fitted, *log_p, *rss, *rdof;
+    Py_ssize_t failures;
+} Refine;
+
+typedef struct {
+    Work *wk;
+    Py_ssize_t ch, best;
+    Brent s;
+} Lane;
+
+/* Channel ch (loaded in wk) fitted at log10 p = chosen. */
+static void finish(Refine *R, Work *wk, Py_ssize_t ch, double chosen)
+{
+    const Problem *P = R->P;
+    R->log_p[ch] = chosen;
+    const double p = pow(10.0, chosen);
+    if (factor(P, p, wk->ab) != 0) {
+        R->rss[ch] = NAN;
+        R->rdof[ch] = NAN;
+        R->failures++;
+        return;
+    }
+    solve(P, wk->ab, wk->rhs, wk->delta);
+    R->rss[ch] = residuals(P, p, wk->col, wk->delta, R->fitted + ch, P->k);
+    R->rdof[ch] = residual_dof(P, wk->ab);
+}
+
+/* The next channel with a search into the lane (0 when none is left); channels without
+ * a finite value on the grid are fitted at its end, as the twin does. */
+static int next_channel(Refine *R, Lane *lane)
+{
+    const Problem *P = R->P;
+    const Py_ssize_t k = P->k, g_count = R->g_count;
+    while (R->next < k) {
+        const Py_ssize_t ch = R->next++;
+        Py_ssize_t best = -1;
+        for (Py_ssize_t g = 0; g < g_count; g++) {
+            const double v = R->values[g * k + ch];
+            if (isfinite(v) && (best < 0 || v < R->values[best * k + ch])) {
+                best = g;
+            }
+        }
+        load_channel(P, R->y, ch, lane->wk);
+        if (best < 0) {
+            finish(R, lane->wk, ch, R->grid[g_count - 1]);
+            continue;
+        }
+        lane->ch = ch;
+        lane->best = best;
+        const double lo = R->grid[best > 0 ? best - 1 : 0];
+        const double hi = R->grid[best + 1 < g_count ? best + 1 : g_count - 1];
+        brent_begin(&lane->s, lo, hi, R->xatol);
+        return 1;
+    }
+    return 0;
+}
+
+static void refine(Refine *R, Work *wks, int lanes)
+{
+    const Py_ssize_t k = R->P->k;
+    Lane lane[LANES];
+    int active[LANES];
+    for (int q = 0; q < lanes; q++) {
+        lane[q].wk = &wks[q];
+        active[q] = next_channel(R, &lane[q]);
+    }
+    for (;;) {
+        Work *wk[LANES];
+        double x[LANES], f[LANES];
+        int which[LANES], count = 0;
+        for (int q = 0; q < lanes; q++) {
+            if (active[q]) {
+                which[count] = q;
+                wk[count] = lane[q].wk;
+                x[count] = lane[q].s.x;
+                count++;
+            }
+        }
+        if (count == 0) {
+            break;
+        }
+        evaluate_lanes(R->P, wk, x, f, count);
+        for (int i = 0; i < count; i++) {
+            Lane *ln = &lane[which[i]];
+            if (brent_step(&ln->s, f[i])) {
+                continue;
+            }
+            const double bound = R->values[ln->best * k + ln->ch];
+            finish(R, ln->wk, ln->ch, ln->s.fx <= bound ? ln->s.xf : R->grid[ln->best]);
+            active[which[i]] = next_channel(R, ln);
+        }
+    }
+}
+
+/* ------------------------------------------------------------ the bands */
+
+/* Divided differences q (rows, m + 1), Q^T W^-1 Q and R in band columns (rows, m + 1),
+ * with the operations of _banded.divided_differences, qwq_band and bspline_gram_band:
+ * R's Gauss sums per sample interval (nodes, weights: Gauss-Legendre, m points), the
+ * B-spline values by Cox-de Boor on knots x padded by m - 1 steps each side. */
+static void bands(const double *x, const double *winv, Py_ssize_t n, int m, const double *nodes,
+                  const double *weights, double *q, double *qwq, double *r)
+{
+    enum { MAXM = 9 };
+    const int ld = m + 1, degree = m - 1;
+    const Py_ssize_t rows = n - m;
+    for (Py_ssize_t j = 0; j < rows; j++) {
+        for (int a = 0; a <= m; a++) {
+            double v = 1.0;
+            for (int b = 0; b <= m; b++) {
+                if (a != b) {
+                    v /= x[j + a] - x[j + b];
+                }
+            }
+            q[j * ld + a] = v;
+        }
+    }
+    for (Py_ssize_t i = 0; i < rows * ld; i++) {
+        qwq[i] = 0.0;
+        r[i] = 0.0;
+    }
+    /* entry (j, j + d) of Q^T W^-1 Q, at [j + d, m - d] */
+    for (int d = 0; d <= m; d++) {
+        for (Py_ssize_t j = 0; j + d < rows; j++) {
+            double acc = 0.0;
+            for (int a = d; a <= m; a++) {
+                acc += q[j * ld + a] * q[(j + d) * ld + a - d] * winv[j + a];
+            }
+            qwq[(j + d) * ld + m - d] = acc;
+        }
+    }
+    /* knots[k] for k in 0 .. n + 2m - 3: x padded by m - 1 steps of the end intervals */
+#define KNOT(k)                                                                                \
+    ((k) < degree ? x[0] - (double)(degree - (k)) * (x[1] - x[0])                              \
+                  : ((k) - degree < n ? x[(k) - degree]                                        \
+                                      : x[n - 1] + (double)((k) - degree - n + 1) *            \
+                                                       (x[n - 1] - x[n - 2])))
+    /* intervals last first: each band entry then adds its pairs in the twin's order */
+    for (Py_ssize_t i = n - 2; i >= 0; i--) {
+        const double h = x[i + 1] - x[i];
+        const double mid = 0.5 * (x[i + 1] + x[i]), half = 0.5 * h;
+        double vals[MAXM][MAXM]; /* vals[s][g]: B-spline i - m + 1 + s at point g */
+        double pts[MAXM], qw[MAXM];
+        for (int g = 0; g < m; g++) {
+            pts[g] = mid + half * nodes[g];
+            qw[g] = half * weights[g];
+            vals[0][g] = 1.0;
+        }
+        for (int rr = 1; rr <= degree; rr++) {
+            for (int g = 0; g < m; g++) {
+                double saved = 0.0, nxt[MAXM];
+                for (int s2 = 0; s2 < rr; s2++) {
+                    const double right = KNOT(degree + s2 + 1 + i) - pts[g];
+                    const double left = pts[g] - KNOT(degree + s2 + 1 - rr + i);
+                    const double term = vals[s2][g] / (right + left);
+                    nxt[s2] = saved + right * term;
+                    saved = left * term;
+                }
+                nxt[rr] = saved;
+                for (int s2 = 0; s2 <= rr; s2++) {
+                    vals[s2][g] = nxt[s2];
+                }
+            }
+        }
+        for (int a = 0; a < m; a++) {
+            const Py_ssize_t j = i - (m - 1) + a; /* the row of B-spline a */
+            for (int b = a; b < m; b++) {
+                const int d = b - a;
+                if (j < 0 || j + d >= rows) {
+                    continue;
+                }
+                double sum = 0.0;
+                for (int g = 0; g < m; g++) {
+                    sum += qw[g] * vals[a][g] * vals[b][g];
+                }
+                r[(j + d) * ld + m - d] += sum;
+            }
+        }
+    }
+#undef KNOT
+    for (Py_ssize_t j = 0; j < rows; j++) {
+        const double sj = (double)m / (x[j + m] - x[j]);
+        for (int d = 0; d <= m && j + d < rows; d++) {
+            const double sd = (double)m / (x[j + d + m] - x[j + d]);
+            r[(j + d) * ld + m - d] *= sj * sd;
+        }
+    }
+}
+
+/* ------------------------------------------------------------ Python glue */
+
+static int work_alloc(const Problem *P, Work *wk)
+{
+    wk->ab = malloc(sizeof(double) * (size_t)(P->rows * (P->m + 1)));
+    wk->buffer = P->k > 1 ? malloc(sizeof(double) * (size_t)P->n) : NULL;
+    wk->rhs = malloc(sizeof(double) * (size_t)P->rows);
+    wk->delta = malloc(sizeof(double) * (size_t)P->rows);
+    return wk->ab && (wk->buffer || P->k == 1) && wk->rhs && wk->delta;
+}
+
+static void work_free(Work *wk)
+{
+    free(wk->ab);
+    free(wk->buffer);
+    free(wk->rhs);
+    free(wk->delta);
+}
+
+/* A contiguous float64 buffer of exactly `count` items; writable if asked. */
+static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t count, int writable,
+                      const char *name)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) != 0) {
+        return -1;
+    }
+    if (view->itemsize != (Py_ssize_t)sizeof(double) || view->format == NULL ||
+        strcmp(view->format, "d") != 0 || view->len != count * (Py_ssize_t)sizeof(double)) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd contiguous float64 values", name,
+                     count);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+enum { B_Q, B_R, B_QWQ, B_W, B_WINV, B_Y, B_OUT, B_COUNT };
+
+/* Parse the problem's arrays (q, r, qwq, w, winv, y, fitted) into P and views. */
+static int get_problem(PyObject *const *objs, int m, Py_ssize_t n, Py_ssize_t k, double fact2,
+                       Problem *P, Py_buffer *views)
+{
+    static const char *names[B_COUNT] = {"q", "r", "qwq", "w", "winv", "y", "fitted"};
+    if (m < 1 || m > 8 || n <= m || k < 1) {
+        PyErr_SetString(PyExc_ValueError, "need 1 <= m <= 8, n > m and k >= 1");
+        return -1;
+    }
+    P->n = n;
+    P->rows = n - m;
+    P->k = k;
+    P->m = m;
+    P->fact2 = fact2;
+    Py_ssize_t counts[B_COUNT] = {P->rows * (m + 1), P->rows * (m + 1), P->rows * (m + 1),
+                                  n,                 n,                 n * k,
+                                  n * k};
+    for (int i = 0; i < B_COUNT; i++) {
+        if (get_buffer(objs[i], &views[i], counts[i], i == B_OUT, names[i]) != 0) {
+            for (int j = 0; j < i; j++) {
+                PyBuffer_Release(&views[j]);
+            }
+            return -1;
+        }
+    }
+    P->q = views[B_Q].buf;
+    P->r = views[B_R].buf;
+    P->qwq = views[B_QWQ].buf;
+    P->w = views[B_W].buf;
+    P->winv = views[B_WINV].buf;
+    return 0;
+}
+
+static void release(Py_buffer *views, int count)
+{
+    for (int i = 0; i < count; i++) {
+        PyBuffer_Release(&views[i]);
+    }
+}
+
+PyDoc_STRVAR(fit_doc,
+             "fit(q, r, qwq, w, winv, y, fitted, rss, m, n, k, p, fact2, want_trace)\n"
+             "--\n\n"
+             "Fit the k channels of y (n, k) at smoothing parameter p: fitted values into\n"
+             "fitted (n, k), sum(w r^2) of each channel into rss (k,). Returns n - m - trace\n"
+             "(n - dof, floored at the smallest normal float) when want_trace, else 0.0;\n"
+             "None when the banded matrix is not positive definite.");
+
+static PyObject *gcv_fit(PyObject *self, PyObject *args)
+{
+    PyObject *objs[B_COUNT], *rss_obj;
+    int m, want_trace;
+    Py_ssize_t n, k;
+    double p, fact2;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOinnddp:fit", &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &objs[5], &objs[6], &rss_obj, &m, &n, &k, &p, &fact2,
+                          &want_trace)) {
+        return NULL;
+    }
+    Problem P;
+    Py_buffer views[B_COUNT], rss_view;
+    if (get_problem(objs, m, n, k, fact2, &P, views) != 0) {
+        return NULL;
+    }
+    if (get_buffer(rss_obj, &rss_view, k, 1, "rss") != 0) {
+        release(views, B_COUNT);
+        return NULL;
+    }
+    Work wk;
+    int ok = work_alloc(&P, &wk);
+    Py_ssize_t failed = 0;
+    double rdof = 0.0;
+    if (ok) {
+        const double *y = views[B_Y].buf;
+        double *fitted = views[B_OUT].buf, *rss = rss_view.buf;
+        Py_BEGIN_ALLOW_THREADS;
+        failed = factor(&P, p, wk.ab);
+        if (failed == 0) {
+            for (Py_ssize_t ch = 0; ch < k; ch++) {
+                load_channel(&P, y, ch, &wk);
+                solve(&P, wk.ab, wk.rhs, wk.delta);
+                rss[ch] = residuals(&P, p, wk.col, wk.delta, fitted + ch, k);
+            }
+            if (want_trace) {
+                rdof = residual_dof(&P, wk.ab);
+            }
+        }
+        Py_END_ALLOW_THREADS;
+    }
+    work_free(&wk);
+    release(views, B_COUNT);
+    PyBuffer_Release(&rss_view);
+    if (!ok) {
+        return PyErr_NoMemory();
+    }
+    if (failed != 0) {
+        Py_RETURN_NONE;
+    }
+    return PyFloat_FromDouble(rdof);
+}
+
+PyDoc_STRVAR(search_doc,
+             "search(q, r, qwq, w, winv, y, fitted, grid, log_p, rss, rdof, m, n, k, fact2, "
+             "xatol)\n"
+             "--\n\n"
+             "GCV search of each channel of y (n, k): the criterion at every point of grid\n"
+             "(log10 p, one factor per point for all channels), then bounded Brent on the\n"
+             "two grid steps around each channel's smallest value, kept when not worse.\n"
+             "Writes each channel's log10 p (k,), its fit at that p into fitted (n, k),\n"
+             "sum(w r^2) into rss (k,) and n - dof into rdof (k,). Returns the number of\n"
+             "channels whose final banded matrix was not positive definite (their rss and\n"
+             "rdof are NaN).");
+
+static PyObject *gcv_search(PyObject *self, PyObject *args)
+{
+    PyObject *objs[B_COUNT], *grid_obj, *logp_obj, *rss_obj, *rdof_obj;
+    int m;
+    Py_ssize_t n, k, g_count;
+    double fact2, xatol;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOinndd:search", &objs[0], &objs[1], &objs[2],
+                          &objs[3], &objs[4], &objs[5], &objs[6], &grid_obj, &logp_obj, &rss_obj,
+                          &rdof_obj, &m, &n, &k, &fact2, &xatol)) {
+        return NULL;
+    }
+    g_count = PyObject_Length(grid_obj);
+    if (g_count < 1) {
+        if (!PyErr_Occurred()) {
+            PyErr_SetString(PyExc_ValueError, "grid: empty");
+        }
+        return NULL;
+    }
+    Problem P;
+    Py_buffer views[B_COUNT], extra[4];
+    if (get_problem(objs, m, n, k, fact2, &P, views) != 0) {
+        return NULL;
+    }
+    PyObject *more[4] = {grid_obj, logp_obj, rss_obj, rdof_obj};
+    static const char *names[4] = {"grid", "log_p", "rss", "rdof"};
+    for (int i = 0; i < 4; i++) {
+        if (get_buffer(more[i], &extra[i], i == 0 ? g_count : k, i > 0, names[i]) != 0) {
+            release(extra, i);
+            release(views, B_COUNT);
+            return NULL;
+        }
+    }
+    Work wk[LANES];
+    memset(wk, 0, sizeof wk);
+    const int lanes = k > 1 ? LANES : 1;
+    double *values = malloc(sizeof(double) * (size_t)(g_count * k));
+    int ok = values != NULL;
+    for (int q = 0; q < lanes; q++) {
+        ok = work_alloc(&P, &wk[q]) && ok;
+    }
+    Py_ssize_t failures = 0;
+    if (ok) {
+        const double *y = views[B_Y].buf, *grid = extra[0].buf;
+        double *fitted = views[B_OUT].buf, *log_p = extra[1].buf, *rss = extra[2].buf;
+        double *rdof = extra[3].buf;
+        Py_BEGIN_ALLOW_THREADS;
+        /* 1. the scan: one factor and one trace per grid point for all channels */
+        for (Py_ssize_t g = 0; g < g_count; g++) {
+            const double p = pow(10.0, grid[g]);
+            if (factor(&P, p, wk[0].ab) != 0) {
+                for (Py_ssize_t ch = 0; ch < k; ch++) {
+                    values[g * k + ch] = INFINITY;
+                }
+                continue;
+            }
+            const double rd = residual_dof(&P, wk[0].ab);
+            for (Py_ssize_t ch = 0; ch < k; ch++) {
+                load_channel(&P, y, ch, &wk[0]);
+                solve(&P, wk[0].ab, wk[0].rhs, wk[0].delta);
+                double s = residuals(&P, p, wk[0].col, wk[0].delta, NULL, 0);
+                values[g * k + ch] = criterion(&P, s, rd);
+            }
+        }
+        /* 2. each channel's refinement, two channels side by side, then its fit */
+        Refine R = {&P, y, grid, values, g_count, 0, xatol, fitted, log_p, rss, rdof, 0};
+        refine(&R, wk, lanes);
+        failures = R.failures;
+        Py_END_ALLOW_THREADS;
+    }
+    free(values);
+    for (int q = 0; q < LANES; q++) {
+        work_free(&wk[q]);
+    }
+    release(extra, 4);
+    release(views, B_COUNT);
+    if (!ok) {
+        return PyErr_NoMemory();
+    }
+    return PyLong_FromSsize_t(failures);
+}
+
+PyDoc_STRVAR(bands_doc, "bands(x, winv, nodes, weights, q, qwq, r, m, n)\n"
+                        "--\n\n"
+                        "The divided differences q (n - m, m + 1) and the bands of Q^T W^-1 Q\n"
+                        "and R (n - m, m + 1, band columns) of samples x (n,), weights 1/winv,\n"
+                        "written into q, qwq and r; nodes and weights: m-point Gauss-Legendre.");
+
+static PyObject *gcv_bands(PyObject *self, PyObject *args)
+{
+    PyObject *objs[7];
+    int m;
+    Py_ssize_t n;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOOOin:bands", &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &objs[5], &objs[6], &m, &n)) {
+        return NULL;
+    }
+    if (m < 1 || m > 8 || n < m + 2) {
+        PyErr_SetString(PyExc_ValueError, "need 1 <= m <= 8 and n >= m + 2");
+        return NULL;
+    }
+    static const char *names[7] = {"x", "winv", "nodes", "weights", "q", "qwq", "r"};
+    const Py_ssize_t band = (n - m) * (m + 1);
+    const Py_ssize_t counts[7] = {n, n, m, m, band, band, band};
+    Py_buffer views[7];
+    for (int i = 0; i < 7; i++) {
+        if (get_buffer(objs[i], &views[i], counts[i], i >= 4, names[i]) != 0) {
+            release(views, i);
+            return NULL;
+        }
+    }
+    Py_BEGIN_ALLOW_THREADS;
+    bands(views[0].buf, views[1].buf, n, m, views[2].buf, views[3].buf, views[4].buf,
+          views[5].buf, views[6].buf);
+    Py_END_ALLOW_THREADS;
+    release(views, 7);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"fit", gcv_fit, METH_VARARGS, fit_doc},
+    {"search", gcv_search, METH_VARARGS, search_doc},
+    {"bands", gcv_bands, METH_VARARGS, bands_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_c_gcv",
+    "Compiled kernel of the GCV smoothing spline (twin: gcv.py and gcv_batch.py).", -1,
+    methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__c_gcv(void)
+{
+    return PyModule_Create(&module);
+}
