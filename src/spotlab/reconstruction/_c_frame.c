@@ -6,17 +6,18 @@
  * few that the first leaves short; those still short are returned to Python, which
  * asks the geometry layer), in the order of operations of _rays.py, so undistorted
  * coordinates equal the twin's to the last bit. Per point: the depth-weighted ODLE of
- * _solvers.odle (one re-weighting pass; its sums in a different order than the
- * twin's matrix product, so the points agree to rounding), the conditioning test, the
- * ray residuals in undistorted pixels and their RMS.
+ * _solvers.odle (one re-weighting pass; its sums formed directly from each ray's
+ * direction rather than through the twin's matrix product, a third of the operations,
+ * so the points agree to rounding), the conditioning test, the ray residuals in
+ * undistorted pixels and their RMS.
  *
  * The rig is one float64 buffer built by Python once per rig (see _native_rig in
  * frame_triangulator.py):
  *   header  C, min_conditioning, origin[3], n_g, n_a, n_h
- *   C camera blocks of 24 + n_g + n_a + n_h numbers:
+ *   C camera blocks of 27 + n_g + n_a + n_h numbers:
  *           cx, cy, skew, fx_inv, fy_inv, k1, k2, p1, p2, k3, distorted,
- *           g[n_g], a[n_a], h[n_h], R[9] (row-major), t[3] (centred frame), f2
- *   M       the ODLE map, 9 x 7C row-major (_solvers._odle_matrix)
+ *           g[n_g], a[n_a], h[n_h], R[9] (row-major), t[3] (centred frame), f2,
+ *           centre[3] (the perspective centre -R't, centred frame)
  * Arrays are C-contiguous; Python checks shapes and dtypes, this file checks sizes.
  * Only the C API and the buffer protocol are used (no numpy headers). The numeric work
  * runs without the GIL.
@@ -32,10 +33,14 @@
 #define HEADER 8
 #define STEP_TOL 1e-6 /* _rays._STEP_TOL */
 #define EXTRA_STEPS 6 /* _rays._EXTRA_STEPS */
+/* Coefficients of the start polynomials g, a, h (_rays._DEGREES plus one). */
+#define NG 7
+#define NA 4
+#define NH 4
 
 typedef struct {
     const double *p; /* the camera's block */
-    const double *g, *a, *h, *R, *t;
+    const double *g, *a, *h, *R, *t, *centre;
     double f2;
     int ng, na, nh;
 } Lens;
@@ -47,7 +52,6 @@ typedef struct {
     int ng, na, nh;
     Py_ssize_t block;
     const double *blocks;
-    const double *M; /* 9 x 7C */
 } Rig;
 
 /* Read the rig header; 0 on success, -1 with an exception set. */
@@ -64,14 +68,13 @@ static int rig_parse(const Py_buffer *buf, Rig *rig) {
     rig->ng = (int)d[5];
     rig->na = (int)d[6];
     rig->nh = (int)d[7];
-    if (rig->C < 1 || rig->ng < 2 || rig->na < 2 || rig->nh < 2) {
+    if (rig->C < 1 || rig->ng != NG || rig->na != NA || rig->nh != NH) {
         PyErr_SetString(PyExc_ValueError, "rig buffer header invalid");
         return -1;
     }
-    rig->block = 24 + rig->ng + rig->na + rig->nh;
+    rig->block = 27 + rig->ng + rig->na + rig->nh;
     rig->blocks = d + HEADER;
-    rig->M = rig->blocks + rig->C * rig->block;
-    if (n != HEADER + rig->C * rig->block + 63 * rig->C) {
+    if (n != HEADER + rig->C * rig->block) {
         PyErr_SetString(PyExc_ValueError, "rig buffer size does not match its header");
         return -1;
     }
@@ -90,6 +93,7 @@ static Lens rig_lens(const Rig *rig, Py_ssize_t c) {
     L.R = L.h + L.nh;
     L.t = L.R + 9;
     L.f2 = L.t[3];
+    L.centre = L.t + 4;
     return L;
 }
 
@@ -156,8 +160,8 @@ static int newton_step(double *px, double *py, double xd, double yd, const doubl
     *px = x - dx;
     *py = y - dy;
     j00 += j11; /* the folded branch: Jacobian not positive definite */
-    ok = ok && j00 > 0.0;
-    return ok && fabs(dx) <= STEP_TOL && fabs(dy) <= STEP_TOL;
+    ok &= j00 > 0.0;
+    return ok & (fabs(dx) <= STEP_TOL) & (fabs(dy) <= STEP_TOL); /* no branch: vectorises */
 }
 
 /* The fitted approximate inverse: _rays.Lens._start. */
@@ -165,9 +169,9 @@ static void start(const Lens *L, double xd, double yd, double *px, double *py) {
     const double p1 = L->p[7], p2 = L->p[8];
     double xx = xd * xd, yy = yd * yd, xy = xd * yd;
     double rho = xx + yy;
-    double g = horner(rho, L->g, L->ng);
-    double a = horner(rho, L->a, L->na);
-    double h = horner(rho, L->h, L->nh);
+    double g = horner(rho, L->g, NG);
+    double a = horner(rho, L->a, NA);
+    double h = horner(rho, L->h, NH);
     h *= rho;
     double x = xd * g, y = yd * g;
     xy *= a;
@@ -186,70 +190,104 @@ static void start(const Lens *L, double xd, double yd, double *px, double *py) {
 /* Undistort the N observations of every camera. uv (C, N, 2); x, y (C, N) get the
  * ideal normalised coordinates (0 where unseen), seen (C, N) 0/1. Flat indices of the
  * observations still short after the extra Newton steps go to slow; returns their
- * count, or -1 if uv holds an infinite value (nothing else is then meaningful). */
+ * count, or -1 if uv holds an infinite value (nothing else is then meaningful).
+ *
+ * The twin takes unseen observations at the principal point and replaces their result
+ * by 0; here the arithmetic runs on the NaN (quietly) and the result is replaced by 0,
+ * with no branch, so that the loop vectorises. Selects take values computed
+ * unconditionally: the compiler does not speculate arithmetic that could trap. */
 static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, double *x, double *y,
                             unsigned char *seen, int64_t *slow) {
     const Py_ssize_t C = rig->C;
-    for (Py_ssize_t i = 0; i < 2 * C * N; ++i) {
-        if (isinf(uv[i])) return -1;
-    }
+    int any_inf = 0;
+    for (Py_ssize_t i = 0; i < 2 * C * N; ++i) any_inf |= fabs(uv[i]) == INFINITY;
+    if (any_inf) return -1;
     Py_ssize_t n_slow = 0;
     for (Py_ssize_t c = 0; c < C; ++c) {
         const Lens L = rig_lens(rig, c);
         const double cx = L.p[0], cy = L.p[1], skew = L.p[2], fx_inv = L.p[3], fy_inv = L.p[4];
-        const int distorted = L.p[10] != 0.0;
-        for (Py_ssize_t n = 0; n < N; ++n) {
-            const Py_ssize_t i = c * N + n;
-            const double u = uv[2 * i], v = uv[2 * i + 1];
-            if (!(isfinite(u) && isfinite(v))) {
-                seen[i] = 0;
-                x[i] = 0.0;
-                y[i] = 0.0;
-                continue;
+        const double *puv = uv + 2 * c * N;
+        double *px = x + c * N, *py = y + c * N;
+        unsigned char *ps = seen + c * N;
+        if (L.p[10] == 0.0) { /* no distortion: the normalised pixel is the ray */
+            for (Py_ssize_t n = 0; n < N; ++n) {
+                double u = puv[2 * n], v = puv[2 * n + 1];
+                int s = (u == u) & (v == v); /* finite: infinities were refused above */
+                double yd = v - cy;
+                yd *= fy_inv;
+                double xd = u - cx;
+                xd -= skew * yd; /* skew 0: xd unchanged */
+                xd *= fx_inv;
+                px[n] = s ? xd : 0.0;
+                py[n] = s ? yd : 0.0;
+                ps[n] = (unsigned char)s;
             }
-            seen[i] = 1;
+            continue;
+        }
+        for (Py_ssize_t n = 0; n < N; ++n) {
+            double u = puv[2 * n], v = puv[2 * n + 1];
+            int s = (u == u) & (v == v);
             double yd = v - cy;
             yd *= fy_inv;
             double xd = u - cx;
-            if (skew != 0.0) xd -= skew * yd;
+            xd -= skew * yd;
             xd *= fx_inv;
-            if (!distorted) {
-                x[i] = xd;
-                y[i] = yd;
-                continue;
-            }
             double xu, yu;
             start(&L, xd, yd, &xu, &yu);
             int done = newton_step(&xu, &yu, xd, yd, L.p + 5);
+            px[n] = s ? xu : 0.0;
+            py[n] = s ? yu : 0.0;
+            ps[n] = (unsigned char)(s * (2 - done)); /* 2: more steps to take */
+        }
+        for (Py_ssize_t n = 0; n < N; ++n) {
+            if (ps[n] != 2) continue;
+            ps[n] = 1;
+            double yd = puv[2 * n + 1] - cy;
+            yd *= fy_inv;
+            double xd = puv[2 * n] - cx;
+            xd -= skew * yd;
+            xd *= fx_inv;
+            int done = 0;
             for (int s = 0; !done && s < EXTRA_STEPS; ++s) {
-                done = newton_step(&xu, &yu, xd, yd, L.p + 5);
+                done = newton_step(px + n, py + n, xd, yd, L.p + 5);
             }
-            x[i] = xu;
-            y[i] = yu;
-            if (!done) slow[n_slow++] = (int64_t)i;
+            if (!done) slow[n_slow++] = (int64_t)(c * N + n);
         }
     }
     return n_slow;
 }
 
-/* The 7 per-ray numbers of _solvers.odle: (w / m'm) (x^2, xy, x, y^2, y, 1) and w. */
-static void ray_sums(double xv, double yv, double q[7]) {
-    double wn = xv * xv;
-    wn += yv * yv;
-    wn += 1.0;
-    wn = 1.0 / wn;
-    q[2] = wn * xv;
-    q[0] = q[2] * xv;
-    q[1] = q[2] * yv;
-    q[4] = wn * yv;
-    q[3] = q[4] * yv;
-    q[5] = wn;
-    q[6] = 1.0;
+/* Add one ray to the normal equations e (A00 A01 A02 A11 A12 A22 b0 b1 b2) of
+ * _solvers.odle: ``A += w (I - d d' / d'd)``, ``b += A c`` for the ray of the
+ * ideal normalised point (x, y) of camera L, with weight ``w`` (0 for unseen rays,
+ * whose x, y are then 0). ``d = R' m`` with ``m = (x, y, 1)`` is the ray's direction,
+ * ``d'd = m'm``, and ``A c = w c + (w / m'm) (m't) d`` since ``R c = -t``: the same
+ * sums as the twin's matrix product of 7 numbers per ray, in fewer operations. */
+static void add_ray(const Lens *L, double xv, double yv, double w, double e[9]) {
+    const double *R = L->R, *t = L->t, *c = L->centre;
+    double mm = xv * xv;
+    mm += yv * yv;
+    mm += 1.0;
+    const double wn = w / mm;
+    const double d0 = R[0] * xv + R[3] * yv + R[6];
+    const double d1 = R[1] * xv + R[4] * yv + R[7];
+    const double d2 = R[2] * xv + R[5] * yv + R[8];
+    const double u0 = wn * d0, u1 = wn * d1, u2 = wn * d2;
+    e[0] += w - u0 * d0;
+    e[1] -= u0 * d1;
+    e[2] -= u0 * d2;
+    e[3] += w - u1 * d1;
+    e[4] -= u1 * d2;
+    e[5] += w - u2 * d2;
+    const double mt = xv * t[0] + yv * t[1] + t[2];
+    e[6] += w * c[0] + mt * u0;
+    e[7] += w * c[1] + mt * u1;
+    e[8] += w * c[2] + mt * u2;
 }
 
-/* Normal equations (9 numbers: A00 A01 A02 A11 A12 A22 b0 b1 b2) solved by the
- * adjugate (_normal_equations.Normal3); conditioning if asked. */
-static void solve3(const double e[9], double X[3], double *conditioning) {
+/* Normal equations e solved by the adjugate (_normal_equations.Normal3) into P;
+ * returns the conditioning ``3 det(A) / (tr(A) I2(A))``. */
+static double solve3(const double e[9], double P[3]) {
     const double a00 = e[0], a01 = e[1], a02 = e[2], a11 = e[3], a12 = e[4], a22 = e[5];
     const double b0 = e[6], b1 = e[7], b2 = e[8];
     double c00 = a11 * a22 - a12 * a12;
@@ -260,66 +298,43 @@ static void solve3(const double e[9], double X[3], double *conditioning) {
     double c22 = a00 * a11 - a01 * a01;
     double det = a00 * c00 + a01 * c01 + a02 * c02;
     double inv = 1.0 / det;
-    X[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
-    X[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
-    X[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
-    if (conditioning) *conditioning = 3.0 * det / ((a00 + a11 + a22) * (c00 + c11 + c22));
+    P[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
+    P[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
+    P[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
+    return 3.0 * det / ((a00 + a11 + a22) * (c00 + c11 + c22));
 }
 
 /* Points of undistorted observations: _solvers.odle (one depth-weighted pass) and the
- * masking and residuals of FrameTriangulator._solve. X (N, 3) world points (NaN where
- * bad), n_views (N,); ray_px (C, N) if not NULL (NaN where unseen or bad); rms (N,)
- * if not NULL. */
+ * masking and residuals of FrameTriangulator._solve, point by point. X (N, 3) world
+ * points (NaN where bad), n_views (N,); ray_px (C, N) if not NULL (NaN where unseen
+ * or bad); rms (N,) if not NULL. x, y must be 0 where unseen. */
 static void solve(const Rig *rig, Py_ssize_t N, const double *x, const double *y,
                   const unsigned char *seen, double *X, double *ray_px, double *rms,
                   int64_t *n_views) {
     const Py_ssize_t C = rig->C;
-    const double *M = rig->M;
-    const Py_ssize_t W = 7 * C; /* row length of M */
     for (Py_ssize_t n = 0; n < N; ++n) {
-        double e[9] = {0.0};
-        double q[7];
+        double e[9] = {0.0}, P[3];
         int64_t views = 0;
         for (Py_ssize_t c = 0; c < C; ++c) {
             const Py_ssize_t i = c * N + n;
-            if (!seen[i]) continue;
-            ++views;
-            ray_sums(x[i], y[i], q);
-            for (int p = 0; p < 9; ++p) {
-                const double *m = M + p * W + 7 * c;
-                double s = 0.0;
-                for (int k = 0; k < 7; ++k) s += m[k] * q[k];
-                e[p] += s;
-            }
-        }
-        double P[3];
-        solve3(e, P, NULL);
-        /* The depth-weighted pass: each ray's numbers times (f / z)^2 at the estimate. */
-        double e2[9] = {0.0};
-        for (Py_ssize_t c = 0; c < C; ++c) {
             const Lens L = rig_lens(rig, c);
+            views += seen[i];
+            add_ray(&L, x[i], y[i], (double)seen[i], e);
+        }
+        solve3(e, P);
+        /* The depth-weighted pass: each ray's weight times (f / z)^2 at the estimate;
+         * an unseen ray adds 0 times that (NaN where it is not finite, as the twin). */
+        memset(e, 0, sizeof(e));
+        for (Py_ssize_t c = 0; c < C; ++c) {
             const Py_ssize_t i = c * N + n;
+            const Lens L = rig_lens(rig, c);
             double z = L.R[6] * P[0] + L.R[7] * P[1] + L.R[8] * P[2];
             z += L.t[2];
             z *= z;
             z = L.f2 / z;
-            if (!seen[i]) {
-                if (!isfinite(z)) { /* the twin's 0 * inf */
-                    for (int p = 0; p < 9; ++p) e2[p] = NAN;
-                }
-                continue;
-            }
-            ray_sums(x[i], y[i], q);
-            for (int k = 0; k < 7; ++k) q[k] *= z;
-            for (int p = 0; p < 9; ++p) {
-                const double *m = M + p * W + 7 * c;
-                double s = 0.0;
-                for (int k = 0; k < 7; ++k) s += m[k] * q[k];
-                e2[p] += s;
-            }
+            add_ray(&L, x[i], y[i], (double)seen[i] * z, e);
         }
-        double conditioning;
-        solve3(e2, P, &conditioning);
+        const double conditioning = solve3(e, P);
         const int bad = views < 2 || !(conditioning >= rig->min_conditioning);
         double sum2 = 0.0;
         for (Py_ssize_t c = 0; c < C; ++c) {

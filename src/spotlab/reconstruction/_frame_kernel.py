@@ -54,7 +54,7 @@ def pack(frame: _solvers.Frame, min_conditioning: float) -> FloatArray:
 
     Returns
     -------
-    ndarray, shape (8 + C (24 + 7 + 4 + 4) + 63 C,)
+    ndarray, shape (8 + C (27 + 7 + 4 + 4),)
     """
     ng, na, nh = (d + 1 for d in _rays._DEGREES)
     C = len(frame.lenses)
@@ -62,12 +62,10 @@ def pack(frame: _solvers.Frame, min_conditioning: float) -> FloatArray:
     identity = [1.0] + [0.0] * (ng - 1), [0.0] * na, [0.0] * nh  # unused: not distorted
     for c, lens in enumerate(frame.lenses):
         g, a, h = (lens.g, lens.a, lens.h) if lens.distorted else identity
-        parts.append(
-            [lens.cx, lens.cy, lens.skew, lens.fx_inv, lens.fy_inv, *lens.k]
-            + [float(lens.distorted), *g, *a, *h]
-            + [*frame.cameras[c].R.ravel(), *frame.t[c], float(frame.f2[c, 0])]
-        )
-    parts.append(list(frame.odle_matrix.ravel()))
+        intrinsic = [lens.cx, lens.cy, lens.skew, lens.fx_inv, lens.fy_inv, *lens.k]
+        R, t = frame.cameras[c].R, frame.t[c]
+        pose = [*R.ravel(), *t, float(frame.f2[c, 0]), *(-R.T @ t)]
+        parts.append([*intrinsic, float(lens.distorted), *g, *a, *h, *pose])
     return np.array([v for part in parts for v in part], dtype=np.float64)
 
 
@@ -141,23 +139,26 @@ class FrameKernel:
         self, x: FloatArray, y: FloatArray, seen: NDArray[np.bool_]
     ) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
         """``FrameTriangulator.solve``: X (N, 3), ray_px (C, N), n_views (N,)."""
-        N = x.shape[1]
+        seen = np.ascontiguousarray(seen, dtype=np.bool_)
+        N = seen.shape[1]
         X = np.empty((N, 3))
         ray_px = np.empty((self._C, N))
         n_views = np.empty(N, dtype=np.int64)
         self._c.solve(
             self._rig,
             N,
-            np.ascontiguousarray(x, dtype=np.float64),
-            np.ascontiguousarray(y, dtype=np.float64),
-            np.ascontiguousarray(seen, dtype=np.bool_),
+            np.where(seen, x, 0.0),  # the kernel reads unseen rays as 0, as the twin
+            np.where(seen, y, 0.0),
+            seen,
             X,
             ray_px,
             n_views,
         )
         return X, ray_px, n_views.astype(np.intp, copy=False)
 
-    def _scratch(self, N: int) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.int64]]:
+    def _scratch(
+        self, N: int
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.int64]]:
         C = self._C
         return (
             np.empty((C, N)),
