@@ -11,8 +11,11 @@
  * so the points agree to rounding), the conditioning test, the ray residuals in
  * undistorted pixels and their RMS.
  *
- * The rig is one float64 buffer built by Python once per rig (see _native_rig in
- * frame_triangulator.py):
+ * The loops run over chunks of 64 observations or points with the arithmetic in
+ * straight lines (selects, no branches, no calls) so that the compiler vectorises them
+ * at the baseline instruction set; -ffp-contract=off keeps every rounding as written.
+ *
+ * The rig is one float64 buffer built by Python once per rig (_frame_kernel.pack):
  *   header  C, min_conditioning, origin[3], n_g, n_a, n_h
  *   C camera blocks of 27 + n_g + n_a + n_h numbers:
  *           cx, cy, skew, fx_inv, fy_inv, k1, k2, p1, p2, k3, distorted,
@@ -33,23 +36,29 @@
 #define HEADER 8
 #define STEP_TOL 1e-6 /* _rays._STEP_TOL */
 #define EXTRA_STEPS 6 /* _rays._EXTRA_STEPS */
+#define CHUNK 64      /* observations per vectorised pass */
 /* Coefficients of the start polynomials g, a, h (_rays._DEGREES plus one). */
 #define NG 7
 #define NA 4
 #define NH 4
 
+/* Inlined into the loops, which the compiler vectorises only without calls. */
+#if defined(__GNUC__)
+#define INLINE static inline __attribute__((always_inline))
+#else
+#define INLINE static inline
+#endif
+
 typedef struct {
     const double *p; /* the camera's block */
     const double *g, *a, *h, *R, *t, *centre;
     double f2;
-    int ng, na, nh;
 } Lens;
 
 typedef struct {
     Py_ssize_t C;
     double min_conditioning;
     const double *origin;
-    int ng, na, nh;
     Py_ssize_t block;
     const double *blocks;
 } Rig;
@@ -65,14 +74,11 @@ static int rig_parse(const Py_buffer *buf, Rig *rig) {
     rig->C = (Py_ssize_t)d[0];
     rig->min_conditioning = d[1];
     rig->origin = d + 2;
-    rig->ng = (int)d[5];
-    rig->na = (int)d[6];
-    rig->nh = (int)d[7];
-    if (rig->C < 1 || rig->ng != NG || rig->na != NA || rig->nh != NH) {
+    if (rig->C < 1 || d[5] != NG || d[6] != NA || d[7] != NH) {
         PyErr_SetString(PyExc_ValueError, "rig buffer header invalid");
         return -1;
     }
-    rig->block = 27 + rig->ng + rig->na + rig->nh;
+    rig->block = 27 + NG + NA + NH;
     rig->blocks = d + HEADER;
     if (n != HEADER + rig->C * rig->block) {
         PyErr_SetString(PyExc_ValueError, "rig buffer size does not match its header");
@@ -84,13 +90,10 @@ static int rig_parse(const Py_buffer *buf, Rig *rig) {
 static Lens rig_lens(const Rig *rig, Py_ssize_t c) {
     Lens L;
     L.p = rig->blocks + c * rig->block;
-    L.ng = rig->ng;
-    L.na = rig->na;
-    L.nh = rig->nh;
     L.g = L.p + 11;
-    L.a = L.g + L.ng;
-    L.h = L.a + L.na;
-    L.R = L.h + L.nh;
+    L.a = L.g + NG;
+    L.h = L.a + NA;
+    L.R = L.h + NH;
     L.t = L.R + 9;
     L.f2 = L.t[3];
     L.centre = L.t + 4;
@@ -98,7 +101,7 @@ static Lens rig_lens(const Rig *rig, Py_ssize_t c) {
 }
 
 /* sum_i coef[i] rho^i, lowest power first (degree >= 1): _rays._horner. */
-static double horner(double rho, const double *coef, int n) {
+INLINE double horner(double rho, const double *coef, int n) {
     double out = coef[n - 1] * rho;
     for (int i = n - 2; i >= 1; --i) {
         out += coef[i];
@@ -111,7 +114,7 @@ static double horner(double rho, const double *coef, int n) {
 /* One Newton step towards brown(x, y) = (xd, yd), in place: _rays._newton_step.
  * Returns whether the step is accepted as converged (size <= STEP_TOL on a positive
  * definite Jacobian; NaN fails). */
-static int newton_step(double *px, double *py, double xd, double yd, const double *k) {
+INLINE int newton_step(double *px, double *py, double xd, double yd, const double *k) {
     const double k1 = k[0], k2 = k[1], p1 = k[2], p2 = k[3], k3 = k[4];
     double x = *px, y = *py;
     double xx = x * x, yy = y * y, xy = x * y;
@@ -165,7 +168,7 @@ static int newton_step(double *px, double *py, double xd, double yd, const doubl
 }
 
 /* The fitted approximate inverse: _rays.Lens._start. */
-static void start(const Lens *L, double xd, double yd, double *px, double *py) {
+INLINE void start(const Lens *L, double xd, double yd, double *px, double *py) {
     const double p1 = L->p[7], p2 = L->p[8];
     double xx = xd * xd, yy = yd * yd, xy = xd * yd;
     double rho = xx + yy;
@@ -187,182 +190,256 @@ static void start(const Lens *L, double xd, double yd, double *px, double *py) {
     *py = y;
 }
 
+/* The fitted start and one Newton step for m observations puv (m, 2) of lens L (its
+ * coefficients in local memory): px, py (m,) the result (0 where unseen), state (m,)
+ * 0 unseen, 1 converged, 2 more steps to take. */
+static void start_and_step(const Lens *L, const double *restrict puv, double *restrict px,
+                           double *restrict py, double *restrict state, Py_ssize_t m) {
+    const double cx = L->p[0], cy = L->p[1], skew = L->p[2], fx_inv = L->p[3];
+    const double fy_inv = L->p[4];
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        const double u = puv[2 * k], v = puv[2 * k + 1];
+        const int s = !isnan(u) & !isnan(v);
+        double yd = v - cy;
+        yd *= fy_inv;
+        double xd = u - cx;
+        xd -= skew * yd;
+        xd *= fx_inv;
+        double xu, yu;
+        start(L, xd, yd, &xu, &yu);
+        const int done = newton_step(&xu, &yu, xd, yd, L->p + 5);
+        px[k] = s ? xu : 0.0;
+        py[k] = s ? yu : 0.0;
+        state[k] = s ? (done ? 1.0 : 2.0) : 0.0;
+    }
+}
+
 /* Undistort the N observations of every camera. uv (C, N, 2); x, y (C, N) get the
  * ideal normalised coordinates (0 where unseen), seen (C, N) 0/1. Flat indices of the
  * observations still short after the extra Newton steps go to slow; returns their
  * count, or -1 if uv holds an infinite value (nothing else is then meaningful).
  *
  * The twin takes unseen observations at the principal point and replaces their result
- * by 0; here the arithmetic runs on the NaN (quietly) and the result is replaced by 0,
- * with no branch, so that the loop vectorises. Selects take values computed
- * unconditionally: the compiler does not speculate arithmetic that could trap. */
+ * by 0; here the arithmetic runs on the NaN (quietly) and the result is replaced by 0.
+ * The first loop over a chunk of observations has no branch and stores doubles only
+ * (no integer stores, the NaN test by isnan), so that the compiler vectorises it; the
+ * second takes the few observations that need more steps. */
 static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, double *x, double *y,
                             unsigned char *seen, int64_t *slow) {
     const Py_ssize_t C = rig->C;
-    int any_inf = 0;
-    for (Py_ssize_t i = 0; i < 2 * C * N; ++i) any_inf |= fabs(uv[i]) == INFINITY;
+    int64_t any_inf = 0;
+    for (Py_ssize_t i = 0; i < 2 * C * N; ++i) any_inf |= isinf(uv[i]) != 0;
     if (any_inf) return -1;
     Py_ssize_t n_slow = 0;
+    double state[CHUNK]; /* per observation: 0 unseen, 1 done, 2 more steps to take */
     for (Py_ssize_t c = 0; c < C; ++c) {
-        const Lens L = rig_lens(rig, c);
-        const double cx = L.p[0], cy = L.p[1], skew = L.p[2], fx_inv = L.p[3], fy_inv = L.p[4];
-        const double *puv = uv + 2 * c * N;
-        double *px = x + c * N, *py = y + c * N;
-        unsigned char *ps = seen + c * N;
-        if (L.p[10] == 0.0) { /* no distortion: the normalised pixel is the ray */
-            for (Py_ssize_t n = 0; n < N; ++n) {
-                double u = puv[2 * n], v = puv[2 * n + 1];
-                int s = (u == u) & (v == v); /* finite: infinities were refused above */
-                double yd = v - cy;
+        /* The lens in local copies: the compiler then knows the stores below do not
+         * change them, and vectorises the loop (alias checks on every coefficient
+         * would exceed its limit). */
+        Lens L = rig_lens(rig, c);
+        double p[11], g[NG], a[NA], h[NH];
+        memcpy(p, L.p, sizeof p);
+        memcpy(g, L.g, sizeof g);
+        memcpy(a, L.a, sizeof a);
+        memcpy(h, L.h, sizeof h);
+        L.p = p;
+        L.g = g;
+        L.a = a;
+        L.h = h;
+        const double cx = p[0], cy = p[1], skew = p[2], fx_inv = p[3], fy_inv = p[4];
+        const int distorted = p[10] != 0.0;
+        for (Py_ssize_t n0 = 0; n0 < N; n0 += CHUNK) {
+            const Py_ssize_t m = N - n0 < CHUNK ? N - n0 : CHUNK;
+            const double *puv = uv + 2 * (c * N + n0);
+            double *px = x + c * N + n0, *py = y + c * N + n0;
+            if (!distorted) { /* the normalised pixel is the ray */
+                for (Py_ssize_t k = 0; k < m; ++k) {
+                    const double u = puv[2 * k], v = puv[2 * k + 1];
+                    const int s = !isnan(u) & !isnan(v); /* infinities refused above */
+                    double yd = v - cy;
+                    yd *= fy_inv;
+                    double xd = u - cx;
+                    xd -= skew * yd; /* skew 0: xd unchanged */
+                    xd *= fx_inv;
+                    px[k] = s ? xd : 0.0;
+                    py[k] = s ? yd : 0.0;
+                    state[k] = s ? 1.0 : 0.0;
+                }
+            } else {
+                start_and_step(&L, puv, px, py, state, m);
+            }
+            for (Py_ssize_t k = 0; k < m; ++k) {
+                seen[c * N + n0 + k] = state[k] != 0.0;
+                if (state[k] != 2.0) continue;
+                double yd = puv[2 * k + 1] - cy;
                 yd *= fy_inv;
-                double xd = u - cx;
-                xd -= skew * yd; /* skew 0: xd unchanged */
+                double xd = puv[2 * k] - cx;
+                xd -= skew * yd;
                 xd *= fx_inv;
-                px[n] = s ? xd : 0.0;
-                py[n] = s ? yd : 0.0;
-                ps[n] = (unsigned char)s;
+                int done = 0;
+                for (int s = 0; !done && s < EXTRA_STEPS; ++s) {
+                    done = newton_step(px + k, py + k, xd, yd, L.p + 5);
+                }
+                if (!done) slow[n_slow++] = (int64_t)(c * N + n0 + k);
             }
-            continue;
-        }
-        for (Py_ssize_t n = 0; n < N; ++n) {
-            double u = puv[2 * n], v = puv[2 * n + 1];
-            int s = (u == u) & (v == v);
-            double yd = v - cy;
-            yd *= fy_inv;
-            double xd = u - cx;
-            xd -= skew * yd;
-            xd *= fx_inv;
-            double xu, yu;
-            start(&L, xd, yd, &xu, &yu);
-            int done = newton_step(&xu, &yu, xd, yd, L.p + 5);
-            px[n] = s ? xu : 0.0;
-            py[n] = s ? yu : 0.0;
-            ps[n] = (unsigned char)(s * (2 - done)); /* 2: more steps to take */
-        }
-        for (Py_ssize_t n = 0; n < N; ++n) {
-            if (ps[n] != 2) continue;
-            ps[n] = 1;
-            double yd = puv[2 * n + 1] - cy;
-            yd *= fy_inv;
-            double xd = puv[2 * n] - cx;
-            xd -= skew * yd;
-            xd *= fx_inv;
-            int done = 0;
-            for (int s = 0; !done && s < EXTRA_STEPS; ++s) {
-                done = newton_step(px + n, py + n, xd, yd, L.p + 5);
-            }
-            if (!done) slow[n_slow++] = (int64_t)(c * N + n);
         }
     }
     return n_slow;
 }
 
-/* Add one ray to the normal equations e (A00 A01 A02 A11 A12 A22 b0 b1 b2) of
- * _solvers.odle: ``A += w (I - d d' / d'd)``, ``b += A c`` for the ray of the
- * ideal normalised point (x, y) of camera L, with weight ``w`` (0 for unseen rays,
- * whose x, y are then 0). ``d = R' m`` with ``m = (x, y, 1)`` is the ray's direction,
- * ``d'd = m'm``, and ``A c = w c + (w / m'm) (m't) d`` since ``R c = -t``: the same
- * sums as the twin's matrix product of 7 numbers per ray, in fewer operations. */
-static void add_ray(const Lens *L, double xv, double yv, double w, double e[9]) {
-    const double *R = L->R, *t = L->t, *c = L->centre;
-    double mm = xv * xv;
-    mm += yv * yv;
-    mm += 1.0;
-    const double wn = w / mm;
-    const double d0 = R[0] * xv + R[3] * yv + R[6];
-    const double d1 = R[1] * xv + R[4] * yv + R[7];
-    const double d2 = R[2] * xv + R[5] * yv + R[8];
-    const double u0 = wn * d0, u1 = wn * d1, u2 = wn * d2;
-    e[0] += w - u0 * d0;
-    e[1] -= u0 * d1;
-    e[2] -= u0 * d2;
-    e[3] += w - u1 * d1;
-    e[4] -= u1 * d2;
-    e[5] += w - u2 * d2;
-    const double mt = xv * t[0] + yv * t[1] + t[2];
-    e[6] += w * c[0] + mt * u0;
-    e[7] += w * c[1] + mt * u1;
-    e[8] += w * c[2] + mt * u2;
+/* Add the rays of camera L to the normal equations of m points, e (9, CHUNK): for each
+ * ``A += w (I - d d' / d'd)``, ``b += A c`` (_solvers.odle's sums) for the ray of the
+ * ideal normalised point (x, y) with weight ``w`` (0 for unseen rays, whose x, y are
+ * then 0). ``d = R' m`` with ``m = (x, y, 1)`` is the ray's direction, ``d'd = m'm``,
+ * and ``A c = w c + (w / m'm) (m't) d`` since ``R c = -t``: the sums of the twin's
+ * product of 7 numbers per ray, in a third of the operations. */
+static void add_rays(const Lens *L, const double *restrict x, const double *restrict y,
+                     const double *restrict w, double (*restrict e)[CHUNK], Py_ssize_t m) {
+    double R[9], t[3], c[3];
+    memcpy(R, L->R, sizeof R);
+    memcpy(t, L->t, sizeof t);
+    memcpy(c, L->centre, sizeof c);
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        const double xv = x[k], yv = y[k], wk = w[k];
+        double mm = xv * xv;
+        mm += yv * yv;
+        mm += 1.0;
+        const double wn = wk / mm;
+        const double d0 = R[0] * xv + R[3] * yv + R[6];
+        const double d1 = R[1] * xv + R[4] * yv + R[7];
+        const double d2 = R[2] * xv + R[5] * yv + R[8];
+        const double u0 = wn * d0, u1 = wn * d1, u2 = wn * d2;
+        e[0][k] += wk - u0 * d0;
+        e[1][k] -= u0 * d1;
+        e[2][k] -= u0 * d2;
+        e[3][k] += wk - u1 * d1;
+        e[4][k] -= u1 * d2;
+        e[5][k] += wk - u2 * d2;
+        const double mt = xv * t[0] + yv * t[1] + t[2];
+        e[6][k] += wk * c[0] + mt * u0;
+        e[7][k] += wk * c[1] + mt * u1;
+        e[8][k] += wk * c[2] + mt * u2;
+    }
 }
 
-/* Normal equations e solved by the adjugate (_normal_equations.Normal3) into P;
- * returns the conditioning ``3 det(A) / (tr(A) I2(A))``. */
-static double solve3(const double e[9], double P[3]) {
-    const double a00 = e[0], a01 = e[1], a02 = e[2], a11 = e[3], a12 = e[4], a22 = e[5];
-    const double b0 = e[6], b1 = e[7], b2 = e[8];
-    double c00 = a11 * a22 - a12 * a12;
-    double c01 = a02 * a12 - a01 * a22;
-    double c02 = a01 * a12 - a02 * a11;
-    double c11 = a00 * a22 - a02 * a02;
-    double c12 = a01 * a02 - a00 * a12;
-    double c22 = a00 * a11 - a01 * a01;
-    double det = a00 * c00 + a01 * c01 + a02 * c02;
-    double inv = 1.0 / det;
-    P[0] = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
-    P[1] = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
-    P[2] = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
-    return 3.0 * det / ((a00 + a11 + a22) * (c00 + c11 + c22));
+/* The normal equations e (9, CHUNK) of m points solved by the adjugate
+ * (_normal_equations.Normal3) into P (3, CHUNK), with the conditioning
+ * ``3 det(A) / (tr(A) I2(A))``. */
+static void solve3(double (*restrict e)[CHUNK], double (*restrict P)[CHUNK],
+                   double *restrict conditioning, Py_ssize_t m) {
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        const double a00 = e[0][k], a01 = e[1][k], a02 = e[2][k], a11 = e[3][k];
+        const double a12 = e[4][k], a22 = e[5][k], b0 = e[6][k], b1 = e[7][k], b2 = e[8][k];
+        double c00 = a11 * a22 - a12 * a12;
+        double c01 = a02 * a12 - a01 * a22;
+        double c02 = a01 * a12 - a02 * a11;
+        double c11 = a00 * a22 - a02 * a02;
+        double c12 = a01 * a02 - a00 * a12;
+        double c22 = a00 * a11 - a01 * a01;
+        double det = a00 * c00 + a01 * c01 + a02 * c02;
+        double inv = 1.0 / det;
+        P[0][k] = (c00 * b0 + c01 * b1 + c02 * b2) * inv;
+        P[1][k] = (c01 * b0 + c11 * b1 + c12 * b2) * inv;
+        P[2][k] = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
+        conditioning[k] = 3.0 * det / ((a00 + a11 + a22) * (c00 + c11 + c22));
+    }
+}
+
+/* The weight of each ray of camera L in the depth-weighted pass: w times (f / z)^2 at
+ * the first estimate P (an unseen ray: 0 times that, NaN where it is not finite, as
+ * in the twin). */
+static void depth_weights(const Lens *L, double (*restrict P)[CHUNK], const double *restrict w,
+                          double *restrict wz, Py_ssize_t m) {
+    const double r0 = L->R[6], r1 = L->R[7], r2 = L->R[8], tz = L->t[2], f2 = L->f2;
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        double z = r0 * P[0][k] + r1 * P[1][k] + r2 * P[2][k];
+        z += tz;
+        z *= z;
+        z = f2 / z;
+        wz[k] = w[k] * z;
+    }
+}
+
+/* Distance (undistorted px) between each ray of camera L and its point P; NaN where
+ * use is 0. sum2 gets the squares of the used ones. */
+static void residuals(const Lens *L, double (*restrict P)[CHUNK], const double *restrict x,
+                      const double *restrict y, const double *restrict use,
+                      double *restrict ray, double *restrict sum2, Py_ssize_t m) {
+    double R[9], t[3];
+    memcpy(R, L->R, sizeof R);
+    memcpy(t, L->t, sizeof t);
+    const double f2 = L->f2;
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        const double X0 = P[0][k], X1 = P[1][k], X2 = P[2][k];
+        double xc = R[0] * X0 + R[1] * X1 + R[2] * X2 + t[0];
+        double yc = R[3] * X0 + R[4] * X1 + R[5] * X2 + t[1];
+        double zc = R[6] * X0 + R[7] * X1 + R[8] * X2 + t[2];
+        double ex = xc / zc - x[k];
+        double ey = yc / zc - y[k];
+        ray[k] = (ex * ex + ey * ey) * f2;
+    }
+    /* A loop of its own: sqrt may set errno, a call the vectorised loop cannot hold. */
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        const double r = sqrt(ray[k]);
+        const double r2 = r * r;
+        ray[k] = use[k] != 0.0 ? r : NAN;
+        sum2[k] += use[k] != 0.0 ? r2 : 0.0;
+    }
 }
 
 /* Points of undistorted observations: _solvers.odle (one depth-weighted pass) and the
- * masking and residuals of FrameTriangulator._solve, point by point. X (N, 3) world
- * points (NaN where bad), n_views (N,); ray_px (C, N) if not NULL (NaN where unseen
- * or bad); rms (N,) if not NULL. x, y must be 0 where unseen. */
+ * masking and residuals of FrameTriangulator._solve, CHUNK points at a time. X (N, 3)
+ * world points (NaN where bad), n_views (N,); ray_px (C, N) if not NULL (NaN where
+ * unseen or bad); rms (N,) if not NULL. x, y must be 0 where unseen. */
 static void solve(const Rig *rig, Py_ssize_t N, const double *x, const double *y,
                   const unsigned char *seen, double *X, double *ray_px, double *rms,
                   int64_t *n_views) {
     const Py_ssize_t C = rig->C;
-    for (Py_ssize_t n = 0; n < N; ++n) {
-        double e[9] = {0.0}, P[3];
-        int64_t views = 0;
+    double e[9][CHUNK], P[3][CHUNK], w[CHUNK], wz[CHUNK], cond[CHUNK], views[CHUNK];
+    double use[CHUNK], ray[CHUNK], sum2[CHUNK];
+    for (Py_ssize_t n0 = 0; n0 < N; n0 += CHUNK) {
+        const Py_ssize_t m = N - n0 < CHUNK ? N - n0 : CHUNK;
+        memset(e, 0, sizeof e);
+        for (Py_ssize_t k = 0; k < m; ++k) views[k] = 0.0;
         for (Py_ssize_t c = 0; c < C; ++c) {
-            const Py_ssize_t i = c * N + n;
             const Lens L = rig_lens(rig, c);
-            views += seen[i];
-            add_ray(&L, x[i], y[i], (double)seen[i], e);
+            const unsigned char *s = seen + c * N + n0;
+            for (Py_ssize_t k = 0; k < m; ++k) w[k] = s[k];
+            for (Py_ssize_t k = 0; k < m; ++k) views[k] += w[k];
+            add_rays(&L, x + c * N + n0, y + c * N + n0, w, e, m);
         }
-        solve3(e, P);
-        /* The depth-weighted pass: each ray's weight times (f / z)^2 at the estimate;
-         * an unseen ray adds 0 times that (NaN where it is not finite, as the twin). */
-        memset(e, 0, sizeof(e));
+        solve3(e, P, cond, m);
+        memset(e, 0, sizeof e);
         for (Py_ssize_t c = 0; c < C; ++c) {
-            const Py_ssize_t i = c * N + n;
             const Lens L = rig_lens(rig, c);
-            double z = L.R[6] * P[0] + L.R[7] * P[1] + L.R[8] * P[2];
-            z += L.t[2];
-            z *= z;
-            z = L.f2 / z;
-            add_ray(&L, x[i], y[i], (double)seen[i] * z, e);
+            const unsigned char *s = seen + c * N + n0;
+            for (Py_ssize_t k = 0; k < m; ++k) w[k] = s[k];
+            depth_weights(&L, P, w, wz, m);
+            add_rays(&L, x + c * N + n0, y + c * N + n0, wz, e, m);
         }
-        const double conditioning = solve3(e, P);
-        const int bad = views < 2 || !(conditioning >= rig->min_conditioning);
-        double sum2 = 0.0;
+        solve3(e, P, cond, m);
+        const double min_conditioning = rig->min_conditioning;
+        for (Py_ssize_t k = 0; k < m; ++k) {
+            const int bad = views[k] < 2.0 || !(cond[k] >= min_conditioning);
+            cond[k] = bad; /* from here: whether the point is masked */
+            sum2[k] = 0.0;
+            n_views[n0 + k] = (int64_t)views[k];
+        }
         for (Py_ssize_t c = 0; c < C; ++c) {
-            const Py_ssize_t i = c * N + n;
-            double r = NAN;
-            if (seen[i] && !bad) {
-                const Lens L = rig_lens(rig, c);
-                const double *R = L.R;
-                double xc = R[0] * P[0] + R[1] * P[1] + R[2] * P[2] + L.t[0];
-                double yc = R[3] * P[0] + R[4] * P[1] + R[5] * P[2] + L.t[1];
-                double zc = R[6] * P[0] + R[7] * P[1] + R[8] * P[2] + L.t[2];
-                double ex = xc / zc - x[i];
-                double ey = yc / zc - y[i];
-                r = sqrt((ex * ex + ey * ey) * L.f2);
-                sum2 += r * r;
-            }
-            if (ray_px) ray_px[i] = r;
+            const Lens L = rig_lens(rig, c);
+            const unsigned char *s = seen + c * N + n0;
+            for (Py_ssize_t k = 0; k < m; ++k) use[k] = s[k] && cond[k] == 0.0;
+            double *out = ray_px ? ray_px + c * N + n0 : ray;
+            residuals(&L, P, x + c * N + n0, y + c * N + n0, use, out, sum2, m);
         }
-        double *out = X + 3 * n;
-        if (bad) {
-            out[0] = out[1] = out[2] = NAN;
-        } else {
-            out[0] = P[0] + rig->origin[0];
-            out[1] = P[1] + rig->origin[1];
-            out[2] = P[2] + rig->origin[2];
+        for (Py_ssize_t k = 0; k < m; ++k) {
+            double *out = X + 3 * (n0 + k);
+            const int bad = cond[k] != 0.0;
+            out[0] = bad ? NAN : P[0][k] + rig->origin[0];
+            out[1] = bad ? NAN : P[1][k] + rig->origin[1];
+            out[2] = bad ? NAN : P[2][k] + rig->origin[2];
+            if (rms) rms[n0 + k] = isnan(out[0]) ? NAN : sqrt(sum2[k] / views[k]);
         }
-        n_views[n] = views;
-        if (rms) rms[n] = isnan(out[0]) ? NAN : sqrt(sum2 / (double)views);
     }
 }
 
