@@ -190,15 +190,16 @@ INLINE void start(const Lens *L, double xd, double yd, double *px, double *py) {
     *py = y;
 }
 
-/* The fitted start and one Newton step for m observations puv (m, 2) of lens L (its
- * coefficients in local memory): px, py (m,) the result (0 where unseen), state (m,)
- * 0 unseen, 1 converged, 2 more steps to take. */
-static void start_and_step(const Lens *L, const double *restrict puv, double *restrict px,
-                           double *restrict py, double *restrict state, Py_ssize_t m) {
+/* The fitted start and one Newton step for m observations of lens L (its coefficients
+ * in local memory), pixel k at puv[k ns], puv[k ns + 1]: px, py (m,) the result (0
+ * where unseen), state (m,) 0 unseen, 1 converged, 2 more steps to take. */
+static void start_and_step(const Lens *L, const double *restrict puv, Py_ssize_t ns,
+                           double *restrict px, double *restrict py, double *restrict state,
+                           Py_ssize_t m) {
     const double cx = L->p[0], cy = L->p[1], skew = L->p[2], fx_inv = L->p[3];
     const double fy_inv = L->p[4];
     for (Py_ssize_t k = 0; k < m; ++k) {
-        const double u = puv[2 * k], v = puv[2 * k + 1];
+        const double u = puv[k * ns], v = puv[k * ns + 1];
         const int s = !isnan(u) & !isnan(v);
         double yd = v - cy;
         yd *= fy_inv;
@@ -214,7 +215,8 @@ static void start_and_step(const Lens *L, const double *restrict puv, double *re
     }
 }
 
-/* Undistort the N observations of every camera. uv (C, N, 2); x, y (C, N) get the
+/* Undistort the N observations of every camera. uv (C, N, 2), or (N, C, 2) if
+ * by_marker (the layout of a frame block's values); x, y (C, N) get the
  * ideal normalised coordinates (0 where unseen), seen (C, N) 0/1. Flat indices of the
  * observations still short after the extra Newton steps go to slow; returns their
  * count, or -1 if uv holds an infinite value (nothing else is then meaningful).
@@ -224,9 +226,11 @@ static void start_and_step(const Lens *L, const double *restrict puv, double *re
  * The first loop over a chunk of observations has no branch and stores doubles only
  * (no integer stores, the NaN test by isnan), so that the compiler vectorises it; the
  * second takes the few observations that need more steps. */
-static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, double *x, double *y,
-                            unsigned char *seen, int64_t *slow) {
+static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, int by_marker,
+                            double *x, double *y, unsigned char *seen, int64_t *slow) {
     const Py_ssize_t C = rig->C;
+    /* Strides (numbers) of uv between cameras and between markers. */
+    const Py_ssize_t cs = by_marker ? 2 : 2 * N, ns = by_marker ? 2 * C : 2;
     int64_t any_inf = 0;
     for (Py_ssize_t i = 0; i < 2 * C * N; ++i) any_inf |= isinf(uv[i]) != 0;
     if (any_inf) return -1;
@@ -250,11 +254,11 @@ static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, doub
         const int distorted = p[10] != 0.0;
         for (Py_ssize_t n0 = 0; n0 < N; n0 += CHUNK) {
             const Py_ssize_t m = N - n0 < CHUNK ? N - n0 : CHUNK;
-            const double *puv = uv + 2 * (c * N + n0);
+            const double *puv = uv + c * cs + n0 * ns;
             double *px = x + c * N + n0, *py = y + c * N + n0;
             if (!distorted) { /* the normalised pixel is the ray */
                 for (Py_ssize_t k = 0; k < m; ++k) {
-                    const double u = puv[2 * k], v = puv[2 * k + 1];
+                    const double u = puv[k * ns], v = puv[k * ns + 1];
                     const int s = !isnan(u) & !isnan(v); /* infinities refused above */
                     double yd = v - cy;
                     yd *= fy_inv;
@@ -266,14 +270,14 @@ static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, doub
                     state[k] = s ? 1.0 : 0.0;
                 }
             } else {
-                start_and_step(&L, puv, px, py, state, m);
+                start_and_step(&L, puv, ns, px, py, state, m);
             }
             for (Py_ssize_t k = 0; k < m; ++k) {
                 seen[c * N + n0 + k] = state[k] != 0.0;
                 if (state[k] != 2.0) continue;
-                double yd = puv[2 * k + 1] - cy;
+                double yd = puv[k * ns + 1] - cy;
                 yd *= fy_inv;
-                double xd = puv[2 * k] - cx;
+                double xd = puv[k * ns] - cx;
                 xd -= skew * yd;
                 xd *= fx_inv;
                 int done = 0;
@@ -464,7 +468,9 @@ static PyObject *py_normalize(PyObject *self, PyObject *args) {
     (void)self;
     Py_buffer rb, uvb, xb, yb, sb, slb;
     Py_ssize_t N;
-    if (!PyArg_ParseTuple(args, "y*ny*w*w*w*w*", &rb, &N, &uvb, &xb, &yb, &sb, &slb)) return NULL;
+    int by_marker;
+    if (!PyArg_ParseTuple(args, "y*ny*pw*w*w*w*", &rb, &N, &uvb, &by_marker, &xb, &yb, &sb, &slb))
+        return NULL;
     Rig rig;
     Py_ssize_t n_slow = 0;
     if (rig_parse(&rb, &rig) < 0 || check(&uvb, rig.C * N * 2, 8, "uv") < 0 ||
@@ -474,7 +480,7 @@ static PyObject *py_normalize(PyObject *self, PyObject *args) {
         return NULL;
     }
     Py_BEGIN_ALLOW_THREADS
-    n_slow = undistort(&rig, N, uvb.buf, xb.buf, yb.buf, sb.buf, slb.buf);
+    n_slow = undistort(&rig, N, uvb.buf, by_marker, xb.buf, yb.buf, sb.buf, slb.buf);
     Py_END_ALLOW_THREADS
     RELEASE(&rb, &uvb, &xb, &yb, &sb, &slb);
     return PyLong_FromSsize_t(n_slow);
@@ -503,42 +509,53 @@ static PyObject *py_solve(PyObject *self, PyObject *args) {
 
 static PyObject *py_frame(PyObject *self, PyObject *args) {
     (void)self;
-    Py_buffer rb, uvb, xb, yb, sb, slb, Xb, rmsb, nvb;
+    Py_buffer rb, uvb, Xb, rmsb, nvb;
     Py_ssize_t N;
-    if (!PyArg_ParseTuple(args, "y*ny*w*w*w*w*w*w*w*", &rb, &N, &uvb, &xb, &yb, &sb, &slb, &Xb,
-                          &rmsb, &nvb))
+    int by_marker;
+    if (!PyArg_ParseTuple(args, "y*ny*pw*w*w*", &rb, &N, &uvb, &by_marker, &Xb, &rmsb, &nvb))
         return NULL;
     Rig rig;
     Py_ssize_t n_slow = 0;
     if (rig_parse(&rb, &rig) < 0 || check(&uvb, rig.C * N * 2, 8, "uv") < 0 ||
-        check(&xb, rig.C * N, 8, "x") < 0 || check(&yb, rig.C * N, 8, "y") < 0 ||
-        check(&sb, rig.C * N, 1, "seen") < 0 || check(&slb, rig.C * N, 8, "slow") < 0 ||
         check(&Xb, N * 3, 8, "X") < 0 || check(&rmsb, N, 8, "rms") < 0 ||
         check(&nvb, N, 8, "n_views") < 0) {
-        RELEASE(&rb, &uvb, &xb, &yb, &sb, &slb, &Xb, &rmsb, &nvb);
+        RELEASE(&rb, &uvb, &Xb, &rmsb, &nvb);
         return NULL;
     }
+    /* x, y, slow (C N numbers each) and seen (C N bytes) in one block of scratch. */
+    const Py_ssize_t CN = rig.C * N;
+    double *work = PyMem_Malloc((size_t)(3 * CN + CN / 8 + 1) * sizeof(double));
+    if (!work) {
+        RELEASE(&rb, &uvb, &Xb, &rmsb, &nvb);
+        return PyErr_NoMemory();
+    }
+    double *x = work, *y = x + CN;
+    int64_t *slow = (int64_t *)(y + CN);
+    unsigned char *seen = (unsigned char *)(slow + CN);
     Py_BEGIN_ALLOW_THREADS
-    n_slow = undistort(&rig, N, uvb.buf, xb.buf, yb.buf, sb.buf, slb.buf);
-    if (n_slow == 0) solve(&rig, N, xb.buf, yb.buf, sb.buf, Xb.buf, NULL, rmsb.buf, nvb.buf);
+    n_slow = undistort(&rig, N, uvb.buf, by_marker, x, y, seen, slow);
+    if (n_slow == 0) solve(&rig, N, x, y, seen, Xb.buf, NULL, rmsb.buf, nvb.buf);
     Py_END_ALLOW_THREADS
-    RELEASE(&rb, &uvb, &xb, &yb, &sb, &slb, &Xb, &rmsb, &nvb);
+    PyMem_Free(work);
+    RELEASE(&rb, &uvb, &Xb, &rmsb, &nvb);
     return PyLong_FromSsize_t(n_slow);
 }
 
 static PyMethodDef methods[] = {
     {"normalize", py_normalize, METH_VARARGS,
-     "normalize(rig, N, uv, x, y, seen, slow) -> n_slow (-1: infinite values)\n\n"
-     "Undistort uv (C, N, 2) into x, y (C, N) and seen (C, N, bool); the flat indices of\n"
-     "observations that did not converge go to slow (C N int64)."},
+     "normalize(rig, N, uv, by_marker, x, y, seen, slow) -> n_slow (-1: infinite values)\n\n"
+     "Undistort uv (C, N, 2), or (N, C, 2) if by_marker, into x, y (C, N) and seen\n"
+     "(C, N, bool); the flat indices of observations that did not converge go to slow\n"
+     "(C N int64)."},
     {"solve", py_solve, METH_VARARGS,
      "solve(rig, N, x, y, seen, X, ray_px, n_views) -> None\n\n"
      "Depth-weighted ODLE of undistorted observations: X (N, 3), ray_px (C, N),\n"
      "n_views (N, int64)."},
     {"frame", py_frame, METH_VARARGS,
-     "frame(rig, N, uv, x, y, seen, slow, X, rms, n_views) -> n_slow\n\n"
+     "frame(rig, N, uv, by_marker, X, rms, n_views) -> n_slow\n\n"
      "normalize then, if every observation converged (n_slow 0), solve with the RMS of\n"
-     "the ray residuals in rms (N,) instead of ray_px."},
+     "the ray residuals in rms (N,) instead of ray_px; otherwise nothing is written\n"
+     "(the caller takes normalize's way)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -90,14 +90,18 @@ class FrameKernel:
         self._rig = pack(frame, min_conditioning)
         self._C = len(frame.lenses)
 
-    def frame(self, uv: FloatArray) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+    def frame(
+        self, uv: FloatArray, by_marker: bool = False
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
         """Points, RMS ray residuals (px) and views of one frame, as
         ``FrameTriangulator.__call__``.
 
         Parameters
         ----------
-        uv : ndarray, shape (C, N, 2)
+        uv : ndarray, shape (C, N, 2), or (N, C, 2) with ``by_marker``
             C-contiguous float64 distorted pixels, NaN where unseen.
+        by_marker : bool
+            ``uv`` is marker by marker (a frame block's layout).
 
         Returns
         -------
@@ -110,15 +114,14 @@ class FrameKernel:
         ReconstructionError
             For infinite values, or pixels where the distortion has no inverse.
         """
-        N = uv.shape[1]
-        x, y, seen, slow = self._scratch(N)
+        N = uv.shape[0 if by_marker else 1]
         X = np.empty((N, 3))
         rms = np.empty(N)
         n_views = np.empty(N, dtype=np.int64)
-        n_slow = self._c.frame(self._rig, N, uv, x, y, seen, slow, X, rms, n_views)
-        if n_slow == 0:
+        if self._c.frame(self._rig, N, uv, by_marker, X, rms, n_views) == 0:
             return X, rms, n_views.astype(np.intp, copy=False)
-        self._finish(uv, x, y, slow, n_slow)
+        # Some observations need the geometry layer (or uv holds infinities): step by step.
+        x, y, seen = self.normalize(uv, by_marker)
         X, ray_px, n_views = self.solve(x, y, seen)
         ray_px *= ray_px
         ray_px[~seen] = 0.0
@@ -127,12 +130,17 @@ class FrameKernel:
         rms[np.isnan(X[:, 0])] = np.nan
         return X, rms, n_views
 
-    def normalize(self, uv: FloatArray) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
-        """``FrameTriangulator.normalize`` of C-contiguous float64 ``uv`` (C, N, 2)."""
-        N = uv.shape[1]
-        x, y, seen, slow = self._scratch(N)
-        n_slow = self._c.normalize(self._rig, N, uv, x, y, seen, slow)
-        self._finish(uv, x, y, slow, n_slow)
+    def normalize(
+        self, uv: FloatArray, by_marker: bool = False
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """``FrameTriangulator.normalize`` of C-contiguous float64 ``uv`` (C, N, 2), or
+        (N, C, 2) with ``by_marker``: x, y, seen of shape (C, N)."""
+        N = uv.shape[0 if by_marker else 1]
+        C = self._C
+        x, y = np.empty((C, N)), np.empty((C, N))
+        seen, slow = np.empty((C, N), dtype=np.bool_), np.empty(C * N, dtype=np.int64)
+        n_slow = self._c.normalize(self._rig, N, uv, by_marker, x, y, seen, slow)
+        self._finish(np.swapaxes(uv, 0, 1) if by_marker else uv, x, y, slow, n_slow)
         return x, y, seen
 
     def solve(
@@ -155,17 +163,6 @@ class FrameKernel:
             n_views,
         )
         return X, ray_px, n_views.astype(np.intp, copy=False)
-
-    def _scratch(
-        self, N: int
-    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.int64]]:
-        C = self._C
-        return (
-            np.empty((C, N)),
-            np.empty((C, N)),
-            np.empty((C, N), dtype=np.bool_),
-            np.empty(C * N, dtype=np.int64),
-        )
 
     def _finish(
         self, uv: FloatArray, x: FloatArray, y: FloatArray, slow: NDArray[np.int64], n_slow: int

@@ -173,6 +173,35 @@ class FrameTriangulator:
         rms[np.isnan(X[:, 0])] = np.nan
         return X, rms, n_views
 
+    def by_marker(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+        """Points of one frame given marker by marker (a frame block's layout).
+
+        :meth:`__call__` of ``uv`` with its first two axes swapped; the compiled kernel
+        reads this layout as it is, without the transposed copy.
+
+        Parameters
+        ----------
+        uv : array_like, shape (N, C, 2)
+            Distorted pixel coordinates per marker and camera; NaN where unseen.
+
+        Returns
+        -------
+        X, rms_px, n_views
+            As :meth:`__call__`.
+
+        Raises
+        ------
+        ReconstructionError
+            As :meth:`__call__`.
+        """
+        arr = np.ascontiguousarray(uv, dtype=np.float64)
+        C = len(self.rig)
+        if arr.ndim != 3 or arr.shape[1] != C or arr.shape[2] != 2:
+            raise ReconstructionError(f"uv must have shape (N, {C}, 2), got {arr.shape}")
+        if self._kernel is not None:
+            return self._kernel.frame(arr, by_marker=True)
+        return self(np.swapaxes(arr, 0, 1))
+
     def normalize(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
         """Ideal normalised coordinates of the observations of one frame.
 

@@ -99,6 +99,8 @@ def test_points_equal_the_twins(name: str, monkeypatch: pytest.MonkeyPatch) -> N
     uv[0, 3, 1] = np.nan  # half an observation
     got, want = pair[0](uv), pair[1](uv)
     _same_points(got, want)
+    for tri in pair:  # marker by marker: the same points
+        _same_points(tri.by_marker(np.swapaxes(uv, 0, 1).copy()), want)
     assert got[2][0] == 0 and got[2][1] == 1 and got[2][2] == 2
     assert np.isnan(got[0][:2]).all() and np.isfinite(got[0][2]).all()
     x, y, seen = pair[0].normalize(uv)
@@ -132,6 +134,9 @@ def test_points_behind_a_camera_and_far_out_pixels(monkeypatch: pytest.MonkeyPat
             _same_points(*results)
     results = _same_behaviour(lambda tri: tri(uv[:, 4:10]), pair)
     _same_points(*results)
+    by_marker = _same_behaviour(lambda tri: tri.by_marker(np.swapaxes(uv[:, 4:10], 0, 1)), pair)
+    _same_points(by_marker[0], results[0])
+    _same_points(by_marker[1], results[0])
     # A point behind camera 0, whose ray (a line) it is on: seen by 0 and 4, then 0, 3-5.
     c0, c4 = rig.cameras[0].center, rig.cameras[4].center
     X = c0 + 200.0 * (c0 - c4) / np.linalg.norm(c0 - c4) + np.array([0.0, 30.0, -20.0])
@@ -165,6 +170,8 @@ def test_bad_input_is_refused_alike(monkeypatch: pytest.MonkeyPatch) -> None:
         pair[0](uv)
     _same_behaviour(lambda tri: tri(uv), pair)
     _same_behaviour(lambda tri: tri.normalize(uv), pair)
+    _same_behaviour(lambda tri: tri.by_marker(np.swapaxes(uv, 0, 1)), pair)
+    _same_behaviour(lambda tri: tri.by_marker(uv), pair)  # (C, N, 2): the wrong shape
 
 
 def test_strided_and_integer_input(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -185,7 +192,11 @@ def test_the_kernel_checks_buffer_sizes() -> None:
     x, y = np.empty((2, 4)), np.empty((2, 4))
     seen, slow = np.empty((2, 4), dtype=bool), np.empty(8, dtype=np.int64)
     with pytest.raises(ValueError, match="uv"):
-        module.normalize(rig, 5, uv, x, y, seen, slow)
+        module.normalize(rig, 5, uv, False, x, y, seen, slow)
     with pytest.raises(ValueError, match="rig"):
-        module.normalize(rig[:-1], 4, uv, x, y, seen, slow)
-    assert module.normalize(rig, 4, uv, x, y, seen, slow) == 0
+        module.normalize(rig[:-1], 4, uv, False, x, y, seen, slow)
+    assert module.normalize(rig, 4, uv, False, x, y, seen, slow) == 0
+    X, rms, n_views = np.empty((4, 3)), np.empty(4), np.empty(4, dtype=np.int64)
+    with pytest.raises(ValueError, match="rms"):
+        module.frame(rig, 4, uv, False, X, rms[:3], n_views)
+    assert module.frame(rig, 4, uv, False, X, rms, n_views) == 0
