@@ -335,21 +335,22 @@ class LivePipeline(SinkBase):
     def on_block(self, stream: str, block: Any) -> None:
         """Frames of one stream: triangulate and hand out every decided frame."""
         st = self._streams.get(stream)
-        if st is None or not len(block):
+        n = len(block)
+        if st is None or not n:
             return
         if self._triangulate is None:  # 3-D points already: x, y, z of the one sensor
             uv = np.asarray(block.data[:, :, 0, :3], dtype=np.float64)
         else:
             uv = pixels_by_marker(st.spec, block.data, block.flags)  # no transposed copy
         with self._lock:
-            st.frames += len(block)
+            st.frames += n
             try:
                 times = st.frame_times(block.ticks)
             except SpotlabError:
-                self._unclocked += len(block)
+                self._unclocked += n
                 return
             arrival, seq = block.arrival_ns, block.seq
-            for i in range(len(block)):
+            for i in range(n):
                 item = _Item(uv[i], int(arrival[i]), int(seq[i]), st, float(times[i]))
                 if self._matcher is None:
                     self._emit([item])
@@ -390,7 +391,7 @@ class LivePipeline(SinkBase):
                 log.error("live pipeline: frame %d not triangulated: %s", self._index, exc)
             return
         ref = members[0]  # the first stream present gives the frame's times
-        last = max(members, key=lambda m: m.arrival_ns)
+        last = ref if len(members) == 1 else max(members, key=lambda m: m.arrival_ns)
         frame = LiveFrame(
             index=self._index,
             seq=ref.seq if group[0] is not None else -1,
