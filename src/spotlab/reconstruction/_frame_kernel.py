@@ -155,8 +155,8 @@ class FrameKernel:
         self._c.solve(
             self._rig,
             N,
-            np.where(seen, x, 0.0),  # the kernel reads unseen rays as 0, as the twin
-            np.where(seen, y, 0.0),
+            np.where(seen, np.asarray(x, dtype=np.float64), 0.0),  # unseen rays: 0, as the twin
+            np.where(seen, np.asarray(y, dtype=np.float64), 0.0),
             seen,
             X,
             ray_px,

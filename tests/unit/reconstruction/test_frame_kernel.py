@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -200,3 +201,25 @@ def test_the_kernel_checks_buffer_sizes() -> None:
     with pytest.raises(ValueError, match="rms"):
         module.frame(rig, 4, uv, False, X, rms[:3], n_views)
     assert module.frame(rig, 4, uv, False, X, rms, n_views) == 0
+
+
+def test_threads_share_one_triangulator() -> None:
+    # The kernel runs without the interpreter lock and keeps no state between calls.
+    rig = ring_rig(8)
+    tri = FrameTriangulator(rig)
+    frames = [_scene(rig, seed)[1] for seed in range(8)]
+    want = [tri(uv) for uv in frames]
+    got: dict[int, list[tuple[np.ndarray, ...]]] = {}
+
+    def work(k: int) -> None:
+        got[k] = [tri(frames[(k + i) % 8]) for i in range(40)]
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k, results in got.items():
+        for i, result in enumerate(results):
+            for a, b in zip(result, want[(k + i) % 8], strict=True):
+                np.testing.assert_array_equal(a, b)
