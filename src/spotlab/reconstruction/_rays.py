@@ -298,9 +298,30 @@ class Lens:
             if not slow.size:
                 return
         # Beyond the fold of the polynomial or not converging: the geometry layer decides.
+        x[slow], y[slow] = self.exact(u[slow], v[slow])
+
+    def exact(self, u: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Ideal normalised coordinates by the geometry layer's inverse, for the few
+        pixels where the fitted start and Newton steps fall short.
+
+        Parameters
+        ----------
+        u, v : ndarray, shape (N,)
+            Pixel coordinates (finite).
+
+        Returns
+        -------
+        x, y : ndarray, shape (N,)
+
+        Raises
+        ------
+        ReconstructionError
+            When the inverse does not converge or lies beyond the fold of the
+            distortion polynomial (no unique ray).
+        """
         camera = self.camera
         try:
-            exact = camera.normalize(np.stack([u[slow], v[slow]], axis=-1))
+            exact = camera.normalize(np.stack([u, v], axis=-1))
         except CalibrationError as exc:
             raise ReconstructionError(f"camera {camera.name!r}: {exc}") from None
         _, _, j00, j01, j11 = brown(exact[:, 0], exact[:, 1], camera.dist)
@@ -309,8 +330,7 @@ class Lens:
                 f"camera {camera.name!r}: pixels beyond the radius where the distortion "
                 "polynomial turns back; no unique ray there"
             )
-        x[slow] = exact[:, 0]
-        y[slow] = exact[:, 1]
+        return exact[:, 0], exact[:, 1]
 
 
 def normalize_seen(

@@ -8,6 +8,9 @@ of all cameras together, the lens parameters stacked along the camera axis (the 
 fitted start and Newton step as :mod:`spotlab.reconstruction._rays`, elementwise the
 same arithmetic, so the points equal :func:`triangulate`'s to rounding). The
 estimator is the depth-weighted ODLE of :func:`triangulate` (one re-weighting pass).
+
+Where the compiled kernel is built (:mod:`spotlab.reconstruction._frame_kernel`), one
+call of it does a frame's work without the GIL; the numpy code here is its twin.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.geometry import Rig
-from spotlab.reconstruction import _rays, _solvers
+from spotlab.reconstruction import _frame_kernel, _rays, _solvers
 
 __all__ = ["FrameTriangulator"]
 
@@ -128,6 +131,7 @@ class FrameTriangulator:
         self._R = np.stack([cam.R for cam in rig])
         self._f = np.sqrt(self._frame.f2)  # (C, 1) px
         self._wide: dict[int, _LensStack] = {}  # widened lens stacks by table width
+        self._kernel = _frame_kernel.load(self._frame, self.min_conditioning)
 
     def __call__(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
         """Points of one frame.
@@ -156,6 +160,8 @@ class FrameTriangulator:
             For ``uv`` of the wrong shape, infinite values, or pixels where the
             distortion has no inverse.
         """
+        if self._kernel is not None:
+            return self._kernel.frame(self._checked(uv))
         x, y, seen = self.normalize(uv)
         everywhere = bool(seen.all())
         X, ray_px, n_views = self._solve(x, y, seen, everywhere)
@@ -166,6 +172,35 @@ class FrameTriangulator:
             rms = np.sqrt(ray_px.sum(axis=0) / n_views)
         rms[np.isnan(X[:, 0])] = np.nan
         return X, rms, n_views
+
+    def by_marker(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+        """Points of one frame given marker by marker (a frame block's layout).
+
+        :meth:`__call__` of ``uv`` with its first two axes swapped; the compiled kernel
+        reads this layout as it is, without the transposed copy.
+
+        Parameters
+        ----------
+        uv : array_like, shape (N, C, 2)
+            Distorted pixel coordinates per marker and camera; NaN where unseen.
+
+        Returns
+        -------
+        X, rms_px, n_views
+            As :meth:`__call__`.
+
+        Raises
+        ------
+        ReconstructionError
+            As :meth:`__call__`.
+        """
+        arr = np.ascontiguousarray(uv, dtype=np.float64)
+        C = len(self.rig)
+        if arr.ndim != 3 or arr.shape[1] != C or arr.shape[2] != 2:
+            raise ReconstructionError(f"uv must have shape (N, {C}, 2), got {arr.shape}")
+        if self._kernel is not None:
+            return self._kernel.frame(arr, by_marker=True)
+        return self(np.swapaxes(arr, 0, 1))
 
     def normalize(self, uv: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
         """Ideal normalised coordinates of the observations of one frame.
@@ -186,10 +221,9 @@ class FrameTriangulator:
         ReconstructionError
             As :meth:`__call__`.
         """
-        arr = np.asarray(uv, dtype=np.float64)
-        C = len(self.rig)
-        if arr.ndim != 3 or arr.shape[0] != C or arr.shape[2] != 2:
-            raise ReconstructionError(f"uv must have shape ({C}, N, 2), got {arr.shape}")
+        arr = self._checked(uv)
+        if self._kernel is not None:
+            return self._kernel.normalize(arr)
         if np.isinf(arr).any():
             raise ReconstructionError("uv holds infinite values: mark unseen points with NaN")
         u, v = arr[..., 0], arr[..., 1]
@@ -208,6 +242,14 @@ class FrameTriangulator:
             x[unseen] = 0.0
             y[unseen] = 0.0
         return x, y, seen
+
+    def _checked(self, uv: Any) -> FloatArray:
+        """``uv`` as a C-contiguous float64 array of shape (C, N, 2), or raise."""
+        arr = np.ascontiguousarray(uv, dtype=np.float64)
+        C = len(self.rig)
+        if arr.ndim != 3 or arr.shape[0] != C or arr.shape[2] != 2:
+            raise ReconstructionError(f"uv must have shape ({C}, N, 2), got {arr.shape}")
+        return arr
 
     def normalize_slots(
         self, uv: FloatArray, camera: NDArray[np.intp], slot: NDArray[np.intp], width: int
@@ -274,6 +316,8 @@ class FrameTriangulator:
             where unseen or where ``X`` is NaN.
         n_views : ndarray of int, shape (N,)
         """
+        if self._kernel is not None:
+            return self._kernel.solve(x, y, seen)
         return self._solve(x, y, seen, bool(seen.all()))
 
     def _solve(

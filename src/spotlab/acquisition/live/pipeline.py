@@ -30,7 +30,7 @@ from spotlab.acquisition.clocks import ClockModel, EdgeClockEstimator
 from spotlab.acquisition.interfaces import Device, SinkBase
 from spotlab.acquisition.live.latency import LatencyStats, LatencySummary
 from spotlab.acquisition.live.matching import FrameMatcher
-from spotlab.acquisition.live.readings import pixels
+from spotlab.acquisition.live.readings import pixels_by_marker
 from spotlab.acquisition.live.results import LiveFrame
 from spotlab.acquisition.lsl.outlet import marker_spec
 from spotlab.acquisition.synchroniser import sample_offsets
@@ -139,7 +139,7 @@ def is_points(spec: StreamSpec) -> bool:
 class _Item(NamedTuple):
     """One frame of one stream waiting to be triangulated (or passed through)."""
 
-    uv: FloatArray  # (S, M, 2) image coordinates, or (M, 3) points of a point3d stream
+    uv: FloatArray  # (M, S, 2) image coordinates, or (M, 3) points of a point3d stream
     arrival_ns: int
     seq: int
     stream: _Stream
@@ -220,7 +220,7 @@ class LivePipeline(SinkBase):
         self._streams: dict[str, _Stream] = {}
         self._matcher: FrameMatcher[_Item] | None = None
         self._lock = threading.Lock()
-        self._uv = np.full((0 if rig is None else len(rig), 0, 2), np.nan)
+        self._uv = np.full((0, 0 if rig is None else len(rig), 2), np.nan)  # (M, C, 2)
         self.labels: tuple[str, ...] = ()
         self.latency = LatencyStats()
         self._index = 0
@@ -289,7 +289,7 @@ class LivePipeline(SinkBase):
             else None
         )
         n_markers = markers.pop()
-        self._uv = np.full((len(rig), n_markers, 2), np.nan)
+        self._uv = np.full((n_markers, len(rig), 2), np.nan)
         self._streams = streams
         self.labels = tuple(f"m{k}" for k in range(n_markers))
         self._tell_consumers(n_markers, chosen[0].rate_hz)
@@ -298,7 +298,7 @@ class LivePipeline(SinkBase):
         centre = np.mean([cam.center for cam in rig], axis=0)
         ahead = np.mean([cam.R[2] for cam in rig], axis=0)
         assert self._triangulate is not None
-        self._triangulate(rig.project(centre[None] + 1000.0 * ahead[None]))
+        self._triangulate.by_marker(rig.project(centre[None] + 1000.0 * ahead[None]).swapaxes(0, 1))
 
     def _configure_points(self, by_name: Mapping[str, StreamSpec]) -> None:
         """Without a rig: one ``point3d`` stream whose points pass through."""
@@ -335,21 +335,22 @@ class LivePipeline(SinkBase):
     def on_block(self, stream: str, block: Any) -> None:
         """Frames of one stream: triangulate and hand out every decided frame."""
         st = self._streams.get(stream)
-        if st is None or not len(block):
+        n = len(block)
+        if st is None or not n:
             return
         if self._triangulate is None:  # 3-D points already: x, y, z of the one sensor
             uv = np.asarray(block.data[:, :, 0, :3], dtype=np.float64)
         else:
-            uv = pixels(st.spec, block.data, block.flags)
+            uv = pixels_by_marker(st.spec, block.data, block.flags)  # no transposed copy
         with self._lock:
-            st.frames += len(block)
+            st.frames += n
             try:
                 times = st.frame_times(block.ticks)
             except SpotlabError:
-                self._unclocked += len(block)
+                self._unclocked += n
                 return
             arrival, seq = block.arrival_ns, block.seq
-            for i in range(len(block)):
+            for i in range(n):
                 item = _Item(uv[i], int(arrival[i]), int(seq[i]), st, float(times[i]))
                 if self._matcher is None:
                     self._emit([item])
@@ -376,21 +377,21 @@ class LivePipeline(SinkBase):
             uv = self._uv
             uv.fill(np.nan)
             for g in members:
-                uv[g.stream.cameras] = g.uv
+                uv[:, g.stream.cameras] = g.uv
         try:
             if self._triangulate is None:  # passed through: the vendor's reconstruction
                 X = uv.copy()
                 rms = np.full(len(X), np.nan)
                 n_views = np.zeros(len(X), dtype=np.intp)
             else:
-                X, rms, n_views = self._triangulate(uv)
+                X, rms, n_views = self._triangulate.by_marker(uv)
         except SpotlabError as exc:
             self._failed += 1
             if self._failures.add(exc):  # the first of its kind: counted all the same
                 log.error("live pipeline: frame %d not triangulated: %s", self._index, exc)
             return
         ref = members[0]  # the first stream present gives the frame's times
-        last = max(members, key=lambda m: m.arrival_ns)
+        last = ref if len(members) == 1 else max(members, key=lambda m: m.arrival_ns)
         frame = LiveFrame(
             index=self._index,
             seq=ref.seq if group[0] is not None else -1,

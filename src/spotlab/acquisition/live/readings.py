@@ -21,7 +21,14 @@ from numpy.typing import NDArray
 
 from spotlab.core.streams import StreamSpec
 
-__all__ = ["FLAG_SATURATED", "PSD_MAX_COUNT", "is_psd_counts", "pixels", "usable_counts"]
+__all__ = [
+    "FLAG_SATURATED",
+    "PSD_MAX_COUNT",
+    "is_psd_counts",
+    "pixels",
+    "pixels_by_marker",
+    "usable_counts",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -66,5 +73,25 @@ def pixels(spec: StreamSpec, data: FloatArray, flags: NDArray[np.uint8]) -> Floa
     ndarray, shape (F, S, M, 2)
         ``x, y``; NaN where missing, and for PSD counts where unusable.
     """
-    uv = usable_counts(data, flags) if is_psd_counts(spec) else data[..., :2]
-    return np.ascontiguousarray(uv.transpose(0, 2, 1, 3))
+    return np.ascontiguousarray(pixels_by_marker(spec, data, flags).transpose(0, 2, 1, 3))
+
+
+def pixels_by_marker(spec: StreamSpec, data: FloatArray, flags: NDArray[np.uint8]) -> FloatArray:
+    """:func:`pixels` in the block's own layout, shape (F, M, S, 2).
+
+    Parameters
+    ----------
+    spec : StreamSpec
+        The ``image2d`` stream.
+    data : ndarray, shape (F, M, S, V)
+        A frame block's values.
+    flags : ndarray of uint8, shape (F, M, S)
+        Its quality flags.
+
+    Returns
+    -------
+    ndarray, shape (F, M, S, 2)
+        ``x, y``, NaN where unusable: a view of ``data`` (no copy) unless the stream
+        holds PSD counts.
+    """
+    return usable_counts(data, flags) if is_psd_counts(spec) else data[..., :2]
