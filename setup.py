@@ -2,7 +2,8 @@
 
 Every ``src/spotlab/**/_c_*.c`` file is a CPython extension module of the package it
 sits in (``src/spotlab/kinematics/_c_gcv.c`` -> ``spotlab.kinematics._c_gcv``). They
-use the C API and the buffer protocol only, so building needs a C compiler and no
+use the C API and the buffer protocol only (code shared by several may sit in a
+``_*.h`` header beside them), so building needs a C compiler and no
 numpy headers. Each has a pure numpy twin that gives the same results: a machine
 without a compiler still installs (with one warning line per kernel) and runs the
 twins, only slower. ``spotlab.core.native.compiled()`` says which kernels are in use.
@@ -27,6 +28,7 @@ def _kernels() -> list[Extension]:
         Extension(
             ".".join(source.relative_to(root).with_suffix("").parts),
             [source.as_posix()],
+            depends=[header.as_posix() for header in sorted(source.parent.glob("_*.h"))],
             extra_compile_args=[] if sys.platform == "win32" else _CFLAGS,
         )
         for source in sorted(root.glob("spotlab/**/_c_*.c"))

@@ -1,12 +1,16 @@
-"""The compiled kernel of :class:`~spotlab.reconstruction.frame_triangulator.FrameTriangulator`.
+"""The compiled kernel of :class:`~spotlab.reconstruction.frame_triangulator.FrameTriangulator`
+and of :func:`~spotlab.reconstruction.triangulate`'s undistortion and ODLE.
 
 ``_c_frame.c`` does for one frame what the triangulator's numpy path does: the lens's
 fitted start and Newton steps for every observation (the same arithmetic in the same
 order, so the same bits), the depth-weighted ODLE, the conditioning test, the ray
-residuals and their RMS, without the GIL. This module packs the rig into the one
-buffer the kernel reads (once per rig) and hands the few observations the Newton
-steps leave short to the geometry layer, as :class:`~spotlab.reconstruction._rays.Lens`
-does. The numpy path stays the twin (``SPOTLAB_NO_NATIVE=1``, or no C compiler).
+residuals and their RMS, without the GIL; for ``triangulate`` it undistorts a range of
+points and solves the depth-weighted ODLE with per-ray weights and any number of
+re-weighting passes, returning the unmasked points and their conditioning. This
+module packs the rig into the one buffer the kernel reads (once per rig) and hands the
+few observations the Newton steps leave short to the geometry layer, as
+:class:`~spotlab.reconstruction._rays.Lens` does. The numpy path stays the twin
+(``SPOTLAB_NO_NATIVE=1``, or no C compiler).
 """
 
 from __future__ import annotations
@@ -163,6 +167,81 @@ class FrameKernel:
             n_views,
         )
         return X, ray_px, n_views.astype(np.intp, copy=False)
+
+    def normalize_range(
+        self, uv: FloatArray, start: int, stop: int
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """:func:`spotlab.reconstruction._rays.normalize_seen` of the points
+        ``start:stop`` of C-contiguous float64 ``uv`` (C, N, 2), without copying them.
+
+        Returns
+        -------
+        x, y : ndarray, shape (C, stop - start)
+            Ideal normalised coordinates, 0 where unseen (the twin's bits).
+        seen : ndarray of bool, shape (C, stop - start)
+        """
+        x, y, seen, slow = self._scratch(stop - start)
+        n_slow = self._c.normalize_range(self._rig, uv.shape[1], uv, start, stop - start, x, y,
+                                         seen, slow)  # fmt: skip
+        self._finish(uv[:, start:stop], x, y, slow, n_slow)
+        return x, y, seen
+
+    def odle_range(
+        self,
+        uv: FloatArray,
+        start: int,
+        stop: int,
+        weights: FloatArray | None,
+        passes: int,
+        X: FloatArray,
+        conditioning: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """:meth:`normalize_range` and the depth-weighted
+        :func:`spotlab.reconstruction._solvers.odle` of the points ``start:stop``, in one
+        call where no observation needs the geometry layer.
+
+        Parameters
+        ----------
+        uv : ndarray, shape (C, N, 2)
+            C-contiguous float64 distorted pixels, NaN where unseen.
+        start, stop : int
+            The points to solve.
+        weights : ndarray, shape (C, stop - start), or None
+            The caller's per-ray weights (None: 1).
+        passes : int
+            Re-weighting passes after the first solution (``iterations``).
+        X : ndarray, shape (stop - start, 3)
+            C-contiguous; gets the centred points, unmasked (the caller masks them).
+        conditioning : ndarray, shape (stop - start,)
+            C-contiguous; gets the conditioning of the last pass.
+
+        Returns
+        -------
+        x, y : ndarray, shape (C, stop - start)
+        seen : ndarray of bool, shape (C, stop - start)
+            As :meth:`normalize_range`.
+        """
+        n = stop - start
+        x, y, seen, slow = self._scratch(n)
+        w = None if weights is None else np.ascontiguousarray(weights, dtype=np.float64)
+        n_slow = self._c.odle(self._rig, uv.shape[1], uv, start, n, w, passes, X, conditioning,
+                              x, y, seen, slow)  # fmt: skip
+        if n_slow:  # some observations need the geometry layer (or uv holds infinities)
+            self._finish(uv[:, start:stop], x, y, slow, n_slow)
+            self._c.odle_solve(self._rig, n, x, y, seen, w, passes, X, conditioning)
+        return x, y, seen
+
+    def _scratch(
+        self, n: int
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.int64]]:
+        """x, y, seen (C, n) and slow (C n) for one call."""
+        C = self._C
+        return (
+            np.empty((C, n)),
+            np.empty((C, n)),
+            np.empty((C, n), dtype=np.bool_),
+            np.empty(C * n, dtype=np.int64),
+        )
 
     def _finish(
         self, uv: FloatArray, x: FloatArray, y: FloatArray, slow: NDArray[np.int64], n_slow: int

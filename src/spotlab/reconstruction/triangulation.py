@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.geometry import Rig
-from spotlab.reconstruction import _rays, _solvers
+from spotlab.reconstruction import _frame_kernel, _rays, _solvers
 
 __all__ = ["METHODS", "TriangulationResult", "triangulate", "triangulate_points"]
 
@@ -284,7 +284,7 @@ def _triangulate(
     rig, arr, w = _check(rig, uv, weights)
     C = len(rig)
     shape = arr.shape[1:-1]
-    flat = arr.reshape(C, -1, 2)
+    flat = np.ascontiguousarray(arr.reshape(C, -1, 2))  # the kernel reads it as is
     seen = _seen(flat)
     n_views = seen.sum(axis=0)
     few = n_views < 2
@@ -305,25 +305,43 @@ def _triangulate(
     conditioning = np.empty(N)
     origin = np.mean([cam.center for cam in rig], axis=0)
     frame = _solvers.Frame(rig.cameras, origin)
+    # The compiled kernel (None: the numpy twin) undistorts, and solves the ODLE, without
+    # the GIL: the worker threads then run in parallel.
+    kernel = _frame_kernel.load(frame, min_conditioning)
+    passes = 1 if iterations is None else iterations
     # Chunks of points whose undistorted coordinates stay in the CPU cache, solved in
     # blocks whose temporaries do too.
     n_workers = _workers(workers, -(-N // _CHUNK))
     n_chunks = max(1, -(-N // _CHUNK))
     n_chunks = -(-n_chunks // n_workers) * n_workers  # the same work for every thread
     step = max(1, -(-N // n_chunks))
-    chunks = [slice(start, start + step) for start in range(0, N, step)]
+    chunks = [slice(start, min(start + step, N)) for start in range(0, N, step)]
     size = max(_MIN_BLOCK, _BLOCK_RAYS // C)
 
     def run(chunk: slice) -> None:
+        solved = kernel is not None and method == "odle"
         with np.errstate(divide="ignore", invalid="ignore"):  # unseen points: masked below
-            x, y = _rays.normalize_seen(frame.lenses, flat[:, chunk], seen[:, chunk])
+            if kernel is None:
+                x, y = _rays.normalize_seen(frame.lenses, flat[:, chunk], seen[:, chunk])
+            elif solved:
+                w_chunk = None if w_flat is None else w_flat[:, chunk]
+                x, y, _ = kernel.odle_range(
+                    flat, chunk.start, chunk.stop, w_chunk, passes, X[chunk], conditioning[chunk]
+                )
+            else:
+                x, y, _ = kernel.normalize_range(flat, chunk.start, chunk.stop)
+            if solved and not refine:
+                return
             for start in range(0, x.shape[1], size):
                 b = slice(start, start + size)
                 g = slice(chunk.start + start, chunk.start + start + x[:, b].shape[1])
                 views = _solvers.Views.build(
                     frame, x[:, b], y[:, b], seen[:, g], None if w_flat is None else w_flat[:, g]
                 )
-                X[g], conditioning[g] = _estimate(views, flat[:, g], method, iterations, refine)
+                if solved:  # the kernel's ODLE, refined as _estimate does
+                    X[g] = _solvers.refine(views, flat[:, g], X[g], refine)[0]
+                else:
+                    X[g], conditioning[g] = _estimate(views, flat[:, g], method, iterations, refine)
 
     if n_workers == 1:
         for chunk in chunks:
