@@ -181,28 +181,53 @@ INLINE void start(const Lens *L, double xd, double yd, double *px, double *py) {
     *py = y;
 }
 
-/* The fitted start and one Newton step for m observations of lens L (its coefficients
- * in local memory), pixel k at puv[k ns], puv[k ns + 1]: px, py (m,) the result (0
- * where unseen), state (m,) 0 unseen, 1 converged, 2 more steps to take. */
-static void start_and_step(const Lens *L, const double *restrict puv, Py_ssize_t ns,
+/* The fitted start and one Newton step for m seen observations of lens L (its
+ * coefficients in local memory), pixels (u[k], v[k]): px, py (m,) the result, state
+ * (m,) 1 converged, 2 more steps to take. */
+static void start_and_step(const Lens *L, const double *restrict u, const double *restrict v,
                            double *restrict px, double *restrict py, double *restrict state,
                            Py_ssize_t m) {
     const double cx = L->p[0], cy = L->p[1], skew = L->p[2], fx_inv = L->p[3];
     const double fy_inv = L->p[4];
     for (Py_ssize_t k = 0; k < m; ++k) {
-        const double u = puv[k * ns], v = puv[k * ns + 1];
-        const int s = !isnan(u) & !isnan(v);
-        double yd = v - cy;
+        double yd = v[k] - cy;
         yd *= fy_inv;
-        double xd = u - cx;
+        double xd = u[k] - cx;
         xd -= skew * yd;
         xd *= fx_inv;
         double xu, yu;
         start(L, xd, yd, &xu, &yu);
         const int done = newton_step(&xu, &yu, xd, yd, L->p + 5);
-        px[k] = s ? xu : 0.0;
-        py[k] = s ? yu : 0.0;
-        state[k] = s ? (done ? 1.0 : 2.0) : 0.0;
+        px[k] = xu;
+        py[k] = yu;
+        state[k] = done ? 1.0 : 2.0;
+    }
+}
+
+/* start_and_step of the seen ones among m observations, pixel k at puv[k ns],
+ * puv[k ns + 1]: they are gathered first (without branches), so that the arithmetic
+ * runs on seen observations only; px, py get 0 and state 0 where unseen. */
+static void start_and_step_seen(const Lens *L, const double *restrict puv, Py_ssize_t ns,
+                                double *restrict px, double *restrict py,
+                                double *restrict state, Py_ssize_t m) {
+    double u[CHUNK], v[CHUNK], ox[CHUNK], oy[CHUNK], os[CHUNK];
+    int idx[CHUNK];
+    Py_ssize_t n = 0;
+    for (Py_ssize_t k = 0; k < m; ++k) {
+        const double uk = puv[k * ns], vk = puv[k * ns + 1];
+        idx[n] = (int)k;
+        u[n] = uk;
+        v[n] = vk;
+        n += !isnan(uk) & !isnan(vk);
+        px[k] = 0.0;
+        py[k] = 0.0;
+        state[k] = 0.0;
+    }
+    start_and_step(L, u, v, ox, oy, os, n);
+    for (Py_ssize_t j = 0; j < n; ++j) {
+        px[idx[j]] = ox[j];
+        py[idx[j]] = oy[j];
+        state[idx[j]] = os[j];
     }
 }
 
@@ -213,11 +238,12 @@ static void start_and_step(const Lens *L, const double *restrict puv, Py_ssize_t
  * observations still short after the extra Newton steps go to slow; returns their
  * count, or -1 if uv holds an infinite value (nothing else is then meaningful).
  *
- * The twin takes unseen observations at the principal point and replaces their result
- * by 0; here the arithmetic runs on the NaN (quietly) and the result is replaced by 0.
- * The first loop over a chunk of observations has no branch and stores doubles only
- * (no integer stores, the NaN test by isnan), so that the compiler vectorises it; the
- * second takes the few observations that need more steps. */
+ * The twin undistorts the seen observations only and puts 0 where unseen; so does the
+ * lens's loop here, on the seen observations of a chunk gathered together (for a lens
+ * without distortion the arithmetic runs on the NaN, quietly, and the result is
+ * replaced by 0). The arithmetic loops over a chunk have no branch and store doubles
+ * only (no integer stores, the NaN test by isnan), so that the compiler vectorises
+ * them; a last loop takes the few observations that need more steps. */
 static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, Py_ssize_t cs,
                             Py_ssize_t ns, double *x, double *y, unsigned char *seen,
                             int64_t *slow) {
@@ -266,7 +292,7 @@ static Py_ssize_t undistort(const Rig *rig, Py_ssize_t N, const double *uv, Py_s
                     state[k] = s ? 1.0 : 0.0;
                 }
             } else {
-                start_and_step(&L, puv, ns, px, py, state, m);
+                start_and_step_seen(&L, puv, ns, px, py, state, m);
             }
             for (Py_ssize_t k = 0; k < m; ++k) {
                 seen[c * N + n0 + k] = state[k] != 0.0;
