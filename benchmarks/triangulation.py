@@ -15,7 +15,9 @@ undistorted by OpenCV inside), and OpenCV ``cv2.triangulatePoints`` on the first
 views of each point after ``cv2.undistortPoints`` (it takes exactly two cameras). A
 missing peer is reported as skipped. Times are the best of ``--repeats`` runs. The default
 estimator (ODLE with depth weights) is timed on one thread (``workers=1``) and on two
-(``workers=2``); the other spotlab rows use the default (the CPUs available).
+(``workers=2``); the other spotlab rows use the default (one thread). Where the
+compiled kernel is built, ``triangulate`` uses it; ``SPOTLAB_NO_NATIVE=1`` times the
+numpy twin.
 
 Usage: ``python benchmarks/triangulation.py [--points 100000] [--repeats 5] [--seed 0]``
 """

@@ -172,8 +172,10 @@ def triangulate_points(
     workers : int or None
         Threads that share the points, in chunks of up to 32768 points (fewer points:
         one thread); None: as many as the CPUs this process may use (at most 8). The
-        threads end before the function returns. Default 1: on a 2-core machine shared
-        with other work a second thread was measured slower (``docs/benchmarks.md``).
+        threads end before the function returns. The compiled kernel releases the GIL,
+        so the threads run in parallel; default 1: on a 2-core machine shared with other
+        work a second thread gained only when the other core was free
+        (``docs/benchmarks.md``).
 
     Returns
     -------
