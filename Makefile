@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 .PHONY: demo test lint typecheck layers unit long hil bench bench-gcvspline fuzz clean
 
 # setup.py and the kernels' C sources too: an editable install compiles them once.
-$(STAMP): pyproject.toml setup.py $(shell find src -name '_c_*.c')
+$(STAMP): pyproject.toml setup.py $(shell find src -name '_c_*.c' -o -name '_*.h')
 	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "spotlab needs Python 3.11 or newer"'
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip

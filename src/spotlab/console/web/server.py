@@ -95,7 +95,7 @@ def serve(
         raise_thread(realtime)
     acq.start()
     app = make_app(acq, token)
-    # no per-message deflate: the live messages (a few kB at 40 Hz) to a page on this
+    # no per-message deflate: the live messages (a few kB at 33 Hz) to a page on this
     # machine or the lab's network are not worth compressing in the acquiring process
     config = uvicorn.Config(
         app, log_level="warning", access_log=False, lifespan="off", ws_per_message_deflate=False

@@ -24,6 +24,12 @@ function el(tag, attrs = {}, text = "") {
   return e;
 }
 
+// Page writes only where something changed: any write, even of the same text, makes the
+// browser restyle, lay out and repaint, and the tables are refreshed 10 times a second.
+function setText(e, text) { if (e.textContent !== text) e.textContent = text; }
+function setClass(e, cls) { if (e.className !== cls) e.className = cls; }
+function setDisabled(e, off) { if (e.disabled !== off) e.disabled = off; }
+
 function fmt(v, digits) {
   if (v === null || v === undefined) return "—";
   return typeof v === "number" && digits !== undefined ? v.toFixed(digits) : String(v);
@@ -32,25 +38,29 @@ function fmt(v, digits) {
 // ---- devices ---------------------------------------------------------------------
 function showDevices(devices) {
   const body = document.querySelector("#devices tbody");
-  body.replaceChildren();
-  for (const d of devices) {
-    const tr = el("tr", { "data-device": d.name });
-    const cells = [
-      [d.name], [d.connected ? "connected" : "not connected", d.connected ? "ok" : "bad"],
-      [d.family], [d.port, "port"], [fmt(d.rate_hz, 1)], [fmt(d.frames)], [fmt(d.lost_frames)],
-      [fmt(d.crc_errors)], [fmt(d.resyncs)], [fmt(d.clock_offset_s, 3)],
-      [fmt(d.clock_drift_ppm, 1)], [d.last_error || ""],
-    ];
-    for (const [text, cls] of cells) {
-      const td = el("td", cls ? { class: cls } : {}, text);
-      if (cls === "port") td.title = text;
-      tr.appendChild(td);
-    }
-    body.appendChild(tr);
+  const names = devices.map((d) => d.name).join("\n");
+  if (body.dataset.names !== names) {  // rows made again only when the devices change
+    body.replaceChildren(...devices.map((d) => el("tr", { "data-device": d.name })));
+    body.dataset.names = names;
   }
+  devices.forEach((d, row) => {
+    const tr = body.rows[row];
+    const cells = [
+      [d.name, ""], [d.connected ? "connected" : "not connected", d.connected ? "ok" : "bad"],
+      [d.family, ""], [d.port, "port"], [fmt(d.rate_hz, 1), ""], [fmt(d.frames), ""],
+      [fmt(d.lost_frames), ""], [fmt(d.crc_errors), ""], [fmt(d.resyncs), ""],
+      [fmt(d.clock_offset_s, 3), ""], [fmt(d.clock_drift_ppm, 1), ""], [d.last_error || "", ""],
+    ];
+    cells.forEach(([text, cls], k) => {
+      const td = tr.cells[k] || tr.appendChild(document.createElement("td"));
+      setText(td, text);
+      setClass(td, cls);
+      if (cls === "port" && td.title !== text) td.title = text;
+    });
+  });
 }
 
-// The device form (outside the table, which is rebuilt with every message).
+// The device form (outside the table, whose cells are refreshed with every slow message).
 function showDeviceChoices(devices) {
   const select = document.getElementById("device-name");
   const names = devices.map((d) => d.name);
@@ -60,7 +70,7 @@ function showDeviceChoices(devices) {
     if (names.includes(chosen)) select.value = chosen;
   }
   const d = devices.find((x) => x.name === select.value);
-  document.getElementById("device-set-rate").disabled = recording || !(d && d.rate_settable);
+  setDisabled(document.getElementById("device-set-rate"), recording || !(d && d.rate_settable));
   // the chosen device's family settings, each titled with what it is and what it is given
   const setting = document.getElementById("device-setting");
   const keys = d ? Object.keys(d.settings || {}) : [];
@@ -74,9 +84,9 @@ function showDeviceChoices(devices) {
     if (keys.includes(chosen)) setting.value = chosen;
     setting.dataset.shown = (d ? d.name : "") + "\n" + shown;
   }
-  document.getElementById("device-set").disabled = recording || keys.length === 0;
+  setDisabled(document.getElementById("device-set"), recording || keys.length === 0);
   // a device reconnects alone in the running session, a trial being recorded goes on
-  document.getElementById("device-reconnect").disabled = false;
+  setDisabled(document.getElementById("device-reconnect"), false);
 }
 
 function deviceAction(what, body) {
@@ -103,8 +113,8 @@ function showBanner(status, devices) {
   for (const d of devices) if (d.last_error) lines.push(d.name + ": " + d.last_error);
   if (status && status.errors && status.errors.lab) lines.push(status.errors.lab);
   const banner = document.getElementById("banner");
-  banner.hidden = lines.length === 0;
-  banner.textContent = lines.join(" · ");
+  if (banner.hidden !== (lines.length === 0)) banner.hidden = lines.length === 0;
+  setText(banner, lines.join(" · "));
 }
 
 // ---- 2-D views -------------------------------------------------------------------
@@ -204,7 +214,7 @@ function show3d(markers, cameras) {
   }
   const c = document.getElementById("view3d");
   // opaque (the backdrop fills it): the compositor copies it instead of blending it
-  const g = c.getContext("2d", { alpha: false });
+  const g = c.getContext("2d", { alpha: false, willReadFrequently: true });
   g.drawImage(drawBackdrop(c, cameras), 0, 0);
   if (!markers) return;
   if (markers.seq !== view.drawnSeq) { view.drawnSeq = markers.seq; received.frames3d += 1; }
@@ -250,13 +260,12 @@ function labelSprite(text) {
 let recording = false;
 function showMode(status) {
   recording = status.mode === "recording";
-  document.getElementById("mode").textContent = recording
-    ? "● recording " + status.trial.id : "preview";
-  document.getElementById("mode").className = recording ? "bad" : "";
-  document.getElementById("record").disabled = recording;
-  document.getElementById("stop").disabled = !recording;
-  document.getElementById("lab").textContent = (status.simulated ? "simulated lab · " : "") + status.lab;
-  document.getElementById("live3d").textContent = status.live_3d === "on" ? "" : "(" + status.live_3d + ")";
+  setText(document.getElementById("mode"), recording ? "● recording " + status.trial.id : "preview");
+  setClass(document.getElementById("mode"), recording ? "bad" : "");
+  setDisabled(document.getElementById("record"), recording);
+  setDisabled(document.getElementById("stop"), !recording);
+  setText(document.getElementById("lab"), (status.simulated ? "simulated lab · " : "") + status.lab);
+  setText(document.getElementById("live3d"), status.live_3d === "on" ? "" : "(" + status.live_3d + ")");
 }
 
 function say(id, text, bad) {
