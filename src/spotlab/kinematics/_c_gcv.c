@@ -121,9 +121,11 @@ enum { LANES = 2, MAXBW = 9 };
 
 /* A = qwq * (p (m!)^2) + r, factored in place as A = U^T U (dpbtf2's operations): U[j, j]
  * on the diagonal slots, U[j, j + t] in A's; fail[q]: 0 or the failing column + 1 of
- * lane q. */
+ * lane q. With `solving`, also the forward solve U^T x = rhs (solve_bw's first half),
+ * row j as soon as column j is factored: the two chains overlap. */
 INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
-                      const int lanes, const int bw)
+                      const double *const *rhs, double *const *x, const int lanes,
+                      const int bw, const int solving)
 {
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
@@ -132,7 +134,11 @@ INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_s
      * before j; the entries of column j + bw are still A's own, assembled here from qwq
      * and r. Columns past the end are zero: they neither couple nor get stored. */
     double B[LANES][MAXBW][MAXBW], l[LANES][MAXBW];
+    double z[LANES][MAXBW]; /* the forward solution at j - bw .. j - 1 (zero before 0) */
     for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            z[q][a] = 0.0;
+        }
         s[q] = p[q] * P->fact2;
         fail[q] = 0;
         /* the slots above the first columns (rows before 0) are zero: the solves read them */
@@ -161,6 +167,18 @@ INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_s
             }
             ajj = sqrt(ajj);
             ab[q][j * ld + bw] = ajj;
+            if (solving) {
+                double dot = 0.0;
+                for (int a = 0; a < bw; a++) { /* rows j - bw .. j - 1 of column j */
+                    dot = FMA(z[q][a], ab[q][j * ld + a], dot);
+                }
+                const double temp = (rhs[q][j] - dot) / ajj;
+                for (int a = 0; a + 1 < bw; a++) {
+                    z[q][a] = z[q][a + 1];
+                }
+                z[q][bw - 1] = temp;
+                x[q][j] = temp;
+            }
             const double rec = 1.0 / ajj;
             for (int t = 1; t <= bw; t++) {
                 l[q][t] = B[q][0][t] * rec;
@@ -183,16 +201,22 @@ INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_s
     }
 }
 
+/* The factors of the lanes; with rhs (not NULL) the forward solves into x too. */
 FMA_CLONES static void factor_lanes(const Problem *P, const double *p, double *const *ab,
-                                    Py_ssize_t *fail, int lanes)
+                                    Py_ssize_t *fail, const double *const *rhs,
+                                    double *const *x, int lanes)
 {
-    BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, LN, BW)));
+    if (rhs != NULL) {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, rhs, x, LN, BW, 1)));
+    } else {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, rhs, x, LN, BW, 0)));
+    }
 }
 
 static Py_ssize_t factor(const Problem *P, double p, double *ab)
 {
     Py_ssize_t fail = 0;
-    factor_lanes(P, &p, &ab, &fail, 1);
+    factor_lanes(P, &p, &ab, &fail, NULL, NULL, 1);
     return fail;
 }
 
@@ -348,14 +372,21 @@ INLINE void companion(double (*X)[MAXBW], const double *negc, double source, dou
  * block b from its end window (its terms summed in order), then block b's map
  * X -> phi X phi^T + psi composed from its steps gives block b - 1's end window. */
 INLINE void trace_bw(const Problem *P, const double *const *ab, double *const *sums,
-                     double *out, const int lanes, const int bw)
+                     double *out, double *const *x, const int lanes, const int bw,
+                     const int solving)
 {
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows, length = P->length;
     double win[LANES][MAXBW][MAXBW], phi[LANES][MAXBW][MAXBW], psi[LANES][MAXBW][MAXBW];
     double end[LANES][MAXBW][MAXBW], left[MAXBW][MAXBW];
     double negc[MAXBW], ny[MAXBW], ro[MAXBW];
+    /* with `solving`, solve_bw's backward half in the same sweep (i descending): zb[q][a]
+     * is the solution at i + 1 + a (zero past the end) */
+    double zb[LANES][MAXBW];
     for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            zb[q][a] = 0.0;
+        }
         for (int a = 0; a < bw; a++) {
             for (int b = 0; b < bw; b++) {
                 end[q][a][b] = 0.0;
@@ -385,6 +416,20 @@ INLINE void trace_bw(const Problem *P, const double *const *ab, double *const *s
                 ro[a] = jj < n ? P->r[jj * ld + bw - (a + 1)] * 2.0 : 0.0;
             }
             for (int q = 0; q < lanes; q++) {
+                if (solving && i < n) {
+                    double temp = x[q][i];
+                    for (int a = bw - 1; a >= 0; a--) {
+                        if (i + 1 + a < n) {
+                            temp = FMA(-zb[q][a], ab[q][(i + 1 + a) * ld + bw - (a + 1)], temp);
+                        }
+                    }
+                    temp /= ab[q][i * ld + bw];
+                    for (int a = bw - 1; a > 0; a--) {
+                        zb[q][a] = zb[q][a - 1];
+                    }
+                    zb[q][0] = temp;
+                    x[q][i] = temp;
+                }
                 double source;
                 coupling_at(ab[q], n, i, negc, &source, bw);
                 /* the trace's terms at i, in the twin's order */
@@ -447,16 +492,22 @@ INLINE void trace_bw(const Problem *P, const double *const *ab, double *const *s
     }
 }
 
+/* The traces of the lanes; with x (not NULL, forward solutions) the backward solves too. */
 FMA_CLONES static void trace_lanes(const Problem *P, const double *const *ab,
-                                   double *const *sums, double *out, int lanes)
+                                   double *const *sums, double *out, double *const *x,
+                                   int lanes)
 {
-    BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, sums, out, LN, BW)));
+    if (x != NULL) {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, sums, out, x, LN, BW, 1)));
+    } else {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, sums, out, x, LN, BW, 0)));
+    }
 }
 
 static double trace(const Problem *P, const double *ab, double *sums)
 {
     double out = 0.0;
-    trace_lanes(P, &ab, &sums, &out, 1);
+    trace_lanes(P, &ab, &sums, &out, NULL, 1);
     return out;
 }
 
@@ -602,9 +653,10 @@ static void evaluate_lanes(const Problem *P, Work *const *wk, const double *log_
         delta[q] = wk[q]->delta;
         sums[q] = wk[q]->sums;
     }
-    factor_lanes(P, p, ab, fail, lanes);
-    solve_lanes(P, abc, rhs, delta, lanes);
-    trace_lanes(P, abc, sums, rdof, lanes);
+    /* the factor with the forward solve, the trace with the backward one: the solves'
+     * chains overlap the others' (each lane's arithmetic that of factor, solve, trace) */
+    factor_lanes(P, p, ab, fail, rhs, delta, lanes);
+    trace_lanes(P, abc, sums, rdof, delta, lanes);
     for (int q = 0; q < lanes; q++) {
         if (fail[q] != 0) {
             f[q] = INFINITY;
@@ -1131,7 +1183,13 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
         double *rdof = extra[3].buf;
         Py_BEGIN_ALLOW_THREADS;
         /* 1. the scan: one factor and one trace per grid point for all channels */
-        for (Py_ssize_t g = 0; g < g_count; g++) {
+        for (Py_ssize_t g = 0; g < g_count && k == 1; g++) {
+            /* one channel: the solves fused into the factor and the trace */
+            Work *one = &wk[0];
+            load_channel(&P, y, 0, one);
+            evaluate_lanes(&P, &one, &grid[g], &values[g], 1);
+        }
+        for (Py_ssize_t g = 0; g < g_count && k > 1; g++) {
             const double p = pow(10.0, grid[g]);
             if (factor(&P, p, wk[0].ab) != 0) {
                 for (Py_ssize_t ch = 0; ch < k; ch++) {
@@ -1140,11 +1198,22 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
                 continue;
             }
             const double rd = residual_dof(&P, &wk[0]);
-            for (Py_ssize_t ch = 0; ch < k; ch++) {
-                load_channel(&P, y, ch, &wk[0]);
-                solve(&P, wk[0].ab, wk[0].rhs, wk[0].delta);
-                double s = residuals(&P, p, wk[0].col, wk[0].delta, NULL, 0, 0);
-                values[g * k + ch] = criterion(&P, s, rd);
+            /* the channels' solves two at a time through the one factor */
+            for (Py_ssize_t ch = 0; ch < k; ch += LANES) {
+                const int count = k - ch < LANES ? (int)(k - ch) : LANES;
+                const double *abs[LANES], *rhs[LANES];
+                double *delta[LANES];
+                for (int q = 0; q < count; q++) {
+                    load_channel(&P, y, ch + q, &wk[q]);
+                    abs[q] = wk[0].ab;
+                    rhs[q] = wk[q].rhs;
+                    delta[q] = wk[q].delta;
+                }
+                solve_lanes(&P, abs, rhs, delta, count);
+                for (int q = 0; q < count; q++) {
+                    double s = residuals(&P, p, wk[q].col, wk[q].delta, NULL, 0, 0);
+                    values[g * k + ch + q] = criterion(&P, s, rd);
+                }
             }
         }
         /* 2. each channel's refinement, two channels side by side, then its fit */
