@@ -1003,8 +1003,19 @@ static PyObject *gcv_fit(PyObject *self, PyObject *args)
         const double *y = views[B_Y].buf;
         double *fitted = views[B_OUT].buf, *rss = rss_view.buf;
         Py_BEGIN_ALLOW_THREADS;
-        failed = factor(&P, p, wk.ab);
-        if (failed == 0) {
+        if (k == 1 && want_trace) {
+            /* one channel: the solves fused into the factor and the trace */
+            double *ab = wk.ab, *delta = wk.delta, *sums = wk.sums, tr = 0.0;
+            const double *abc = wk.ab, *rhs = wk.rhs;
+            load_channel(&P, y, 0, &wk);
+            factor_lanes(&P, &p, &ab, &failed, &rhs, &delta, 1);
+            if (failed == 0) {
+                trace_lanes(&P, &abc, &sums, &tr, &delta, 1);
+                rss[0] = residuals(&P, p, wk.col, wk.delta, fitted, 1, 0);
+                rdof = (double)P.rows - tr;
+                rdof = rdof > DBL_MIN ? rdof : DBL_MIN;
+            }
+        } else if ((failed = factor(&P, p, wk.ab)) == 0) {
             for (Py_ssize_t ch = 0; ch < k; ch++) {
                 load_channel(&P, y, ch, &wk);
                 solve(&P, wk.ab, wk.rhs, wk.delta);
