@@ -113,7 +113,9 @@ enum { LANES = 2, MAXBW = 9 };
  *   pairwise sum adds them. */
 #define FMA(a, b, c) fma((a), (b), (c))
 
-#if defined(__GNUC__) && defined(__x86_64__) && defined(__linux__)
+/* GCC on x86-64 glibc (ifunc): a clone with the FMA instruction and a default one;
+ * elsewhere one build (libm's fma, or the instruction where the target has it) */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__GLIBC__)
 #define FMA_CLONES __attribute__((target_clones("fma", "default")))
 #else
 #define FMA_CLONES
