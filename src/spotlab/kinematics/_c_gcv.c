@@ -1,5 +1,5 @@
 /* Compiled kernel of the GCV smoothing spline (numpy twin: gcv.py, gcv_batch.py,
- * _takahashi.py, _brent.py).
+ * _takahashi.py, _brent.py); the bands it reads are _c_bands.c's.
  *
  * Reinsch's banded system (R + p (m!)^2 Q^T W^-1 Q) delta = Q^T y of half-bandwidth m,
  * its Cholesky factor, the fitted values f = y - p (m!)^2 W^-1 Q delta, the weighted
@@ -14,10 +14,10 @@
  *                             storage read column after column: [j, m - d] = A[j - d, j]
  *   w, winv    (n,)           weights and their inverses
  *   y, fitted  (n, k)         samples and fitted values, channels side by side
- * with rows = n - m. The factor is A = U^T D U (U unit upper triangular; the twin uses
- * LAPACK's A = U^T U, equal to rounding); the sums of residuals are numpy's pairwise
- * sums. The numeric
- * work runs without the GIL.
+ * with rows = n - m. Every figure is the twin's to the last bit (the factor, solves and
+ * trace in the twin's operations, see "The twin's arithmetic" below; the sums of
+ * residuals in numpy's order), so a search visits the twin's points and stops at its p.
+ * The numeric work runs without the GIL.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -63,6 +63,7 @@ typedef struct {
     Py_ssize_t rows; /* n - m */
     Py_ssize_t k;    /* channels */
     int m;           /* half-bandwidth */
+    Py_ssize_t length, blocks; /* the trace's blocks: samples per block, blocks */
     const double *q, *r, *qwq, *w, *winv;
     double fact2; /* (m!)^2 */
 } Problem;
@@ -73,6 +74,7 @@ typedef struct {
     double *buffer;    /* (n,) a channel of several, or NULL for one */
     double *rhs;   /* (rows,) Q^T y of that channel */
     double *delta; /* (rows,) the solution */
+    double *sums;  /* (blocks,) the trace's sum of each block */
 } Work;
 
 /* ---------------------------------------------------------------- algebra */
@@ -93,12 +95,39 @@ enum { LANES = 2, MAXBW = 9 };
         call;                                                                                  \
     }
 
-/* A = qwq * (p (m!)^2) + r, factored in place as A = U^T D U, U unit upper triangular
- * (U[j, j + t] in A's slots, 1 / D[j] on the diagonal); fail[q]: 0 or the failing
- * column + 1 of lane q. LDL^T rather than LAPACK's LL^T: no square root on the chain
- * from column to column. */
+/* The twin's arithmetic, operation for operation, so that every figure is bitwise its:
+ *
+ * - the factor is LAPACK's dpbtrf as the twin's SciPy calls it (reference LAPACK over
+ *   OpenBLAS): for half-bandwidths below its block size 32, dpbtf2, column by column a
+ *   square root, a scaling by the reciprocal (dscal with 1 / U[j, j]) and a rank-1
+ *   update (dsyr with alpha = -1, which OpenBLAS runs as axpy's y += (alpha x_c) x_r);
+ * - the solve is dpbtrs: dtbsv transposed (OpenBLAS: a dot product, then a division)
+ *   and dtbsv not transposed (a division, then axpy into the rows above);
+ * - OpenBLAS's axpy and dot kernels for these short vectors (length <= m) are fused
+ *   multiply-adds on processors with FMA (checked on Haswell/Zen kernels, the ones
+ *   SciPy's OpenBLAS picks there): FMA below is C99's fma, one rounding, whatever the
+ *   processor (its clones use the instruction where there is one, else libm);
+ * - the trace is _takahashi's block recursion (the samples in blocks of ceil(sqrt(rows)),
+ *   each block's map composed, the maps chained from the last block, then every block
+ *   run from its end, its terms summed in order) and the blocks' sums added as numpy's
+ *   pairwise sum adds them. */
+#define FMA(a, b, c) fma((a), (b), (c))
+
+/* GCC on x86-64 glibc (ifunc): a clone with the FMA instruction and a default one;
+ * elsewhere one build (libm's fma, or the instruction where the target has it) */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__GLIBC__)
+#define FMA_CLONES __attribute__((target_clones("fma", "default")))
+#else
+#define FMA_CLONES
+#endif
+
+/* A = qwq * (p (m!)^2) + r, factored in place as A = U^T U (dpbtf2's operations): U[j, j]
+ * on the diagonal slots, U[j, j + t] in A's; fail[q]: 0 or the failing column + 1 of
+ * lane q. With `solving`, also the forward solve U^T x = rhs (solve_bw's first half),
+ * row j as soon as column j is factored: the two chains overlap. */
 INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
-                      const int lanes, const int bw)
+                      const double *const *rhs, double *const *x, const int lanes,
+                      const int bw, const int solving)
 {
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
@@ -106,8 +135,12 @@ INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_s
     /* B[q][r][c] = A[j + r, j + c] (r <= c <= bw) of lane q as updated by the columns
      * before j; the entries of column j + bw are still A's own, assembled here from qwq
      * and r. Columns past the end are zero: they neither couple nor get stored. */
-    double B[LANES][MAXBW][MAXBW], v[LANES][MAXBW], l[LANES][MAXBW];
+    double B[LANES][MAXBW][MAXBW], l[LANES][MAXBW];
+    double z[LANES][MAXBW]; /* the forward solution at j - bw .. j - 1 (zero before 0) */
     for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            z[q][a] = 0.0;
+        }
         s[q] = p[q] * P->fact2;
         fail[q] = 0;
         /* the slots above the first columns (rows before 0) are zero: the solves read them */
@@ -130,19 +163,32 @@ INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_s
                 const Py_ssize_t at = col * ld + r; /* A[j + r, j + bw] */
                 B[q][r][bw] = col < n ? P->qwq[at] * s[q] + P->r[at] : 0.0;
             }
-            const double d = B[q][0][0];
-            if (!(d > 0.0) && fail[q] == 0) {
+            double ajj = B[q][0][0];
+            if (!(ajj > 0.0) && fail[q] == 0) {
                 fail[q] = j + 1; /* the lane goes on, its figures are not used */
             }
-            const double rd = 1.0 / d;
-            ab[q][j * ld + bw] = rd;
+            ajj = sqrt(ajj);
+            ab[q][j * ld + bw] = ajj;
+            if (solving) {
+                double dot = 0.0;
+                for (int a = 0; a < bw; a++) { /* rows j - bw .. j - 1 of column j */
+                    dot = FMA(z[q][a], ab[q][j * ld + a], dot);
+                }
+                const double temp = (rhs[q][j] - dot) / ajj;
+                for (int a = 0; a + 1 < bw; a++) {
+                    z[q][a] = z[q][a + 1];
+                }
+                z[q][bw - 1] = temp;
+                x[q][j] = temp;
+            }
+            const double rec = 1.0 / ajj;
             for (int t = 1; t <= bw; t++) {
-                v[q][t] = B[q][0][t];
-                l[q][t] = v[q][t] * rd;
+                l[q][t] = B[q][0][t] * rec;
             }
             for (int c = 1; c <= bw; c++) {
+                const double neg = -1.0 * l[q][c];
                 for (int r = 1; r <= c; r++) {
-                    B[q][r][c] -= l[q][r] * v[q][c];
+                    B[q][r][c] = FMA(neg, l[q][r], B[q][r][c]);
                 }
                 if (j + c < n) {
                     ab[q][(j + c) * ld + bw - c] = l[q][c];
@@ -157,26 +203,34 @@ INLINE void factor_bw(const Problem *P, const double *p, double *const *ab, Py_s
     }
 }
 
-static void factor_lanes(const Problem *P, const double *p, double *const *ab, Py_ssize_t *fail,
-                         int lanes)
+/* The factors of the lanes; with rhs (not NULL) the forward solves into x too. */
+FMA_CLONES static void factor_lanes(const Problem *P, const double *p, double *const *ab,
+                                    Py_ssize_t *fail, const double *const *rhs,
+                                    double *const *x, int lanes)
 {
-    BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, LN, BW)));
+    if (rhs != NULL) {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, rhs, x, LN, BW, 1)));
+    } else {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, factor_bw(P, p, ab, fail, rhs, x, LN, BW, 0)));
+    }
 }
 
 static Py_ssize_t factor(const Problem *P, double p, double *ab)
 {
     Py_ssize_t fail = 0;
-    factor_lanes(P, &p, &ab, &fail, 1);
+    factor_lanes(P, &p, &ab, &fail, NULL, NULL, 1);
     return fail;
 }
 
-/* x[q] = inv(U^T D U) rhs[q]: U^T z = rhs forward, then U x = D^-1 z backward. */
+/* x[q] = inv(U^T U) rhs[q] (dpbtrs): U^T z = rhs forward, then U x = z backward. */
 INLINE void solve_bw(const Problem *P, const double *const *ab, const double *const *rhs,
                      double *const *x, const int lanes, const int bw)
 {
     const int ld = bw + 1;
     const Py_ssize_t n = P->rows;
-    /* z[q][a] = lane q's solution at j - bw + a, kept in registers (zero before the start) */
+    /* z[q][a] = lane q's solution at j - bw + a, kept in registers (zero before the start,
+     * where the factor's slots are zero too: the dot product's leading terms are then
+     * exact zeros, as if it were shorter) */
     double z[LANES][MAXBW];
     for (int q = 0; q < lanes; q++) {
         for (int a = 0; a < bw; a++) {
@@ -185,10 +239,11 @@ INLINE void solve_bw(const Problem *P, const double *const *ab, const double *co
     }
     for (Py_ssize_t j = 0; j < n; j++) {
         for (int q = 0; q < lanes; q++) {
-            double temp = rhs[q][j];
-            for (int a = 0; a < bw; a++) { /* x[j - 1] last: the shortest chain */
-                temp -= ab[q][j * ld + a] * z[q][a];
+            double dot = 0.0;
+            for (int a = 0; a < bw; a++) { /* rows j - bw .. j - 1 */
+                dot = FMA(z[q][a], ab[q][j * ld + a], dot);
             }
+            const double temp = (rhs[q][j] - dot) / ab[q][j * ld + bw];
             for (int a = 0; a + 1 < bw; a++) {
                 z[q][a] = z[q][a + 1];
             }
@@ -196,7 +251,8 @@ INLINE void solve_bw(const Problem *P, const double *const *ab, const double *co
             x[q][j] = temp;
         }
     }
-    /* backward: z[q][a] = the solution at j + 1 + a (zero past the end) */
+    /* backward: z[q][a] = the solution at j + 1 + a (zero past the end); row j takes the
+     * axpy of column j + bw first, j + 1 last */
     for (int q = 0; q < lanes; q++) {
         for (int a = 0; a < bw; a++) {
             z[q][a] = 0.0;
@@ -204,13 +260,14 @@ INLINE void solve_bw(const Problem *P, const double *const *ab, const double *co
     }
     for (Py_ssize_t j = n - 1; j >= 0; j--) {
         for (int q = 0; q < lanes; q++) {
-            double temp = x[q][j] * ab[q][j * ld + bw];
-            for (int a = bw - 1; a >= 0; a--) { /* x[j + 1] last */
+            double temp = x[q][j];
+            for (int a = bw - 1; a >= 0; a--) {
                 const Py_ssize_t i = j + 1 + a;
                 if (i < n) {
-                    temp -= ab[q][i * ld + bw - (a + 1)] * z[q][a];
+                    temp = FMA(-z[q][a], ab[q][i * ld + bw - (a + 1)], temp);
                 }
             }
+            temp /= ab[q][j * ld + bw];
             for (int a = bw - 1; a > 0; a--) {
                 z[q][a] = z[q][a - 1];
             }
@@ -220,8 +277,8 @@ INLINE void solve_bw(const Problem *P, const double *const *ab, const double *co
     }
 }
 
-static void solve_lanes(const Problem *P, const double *const *ab, const double *const *rhs,
-                        double *const *x, int lanes)
+FMA_CLONES static void solve_lanes(const Problem *P, const double *const *ab,
+                                   const double *const *rhs, double *const *x, int lanes)
 {
     BY_LANES(lanes, BY_BANDWIDTH(P->m, solve_bw(P, ab, rhs, x, LN, BW)));
 }
@@ -229,86 +286,6 @@ static void solve_lanes(const Problem *P, const double *const *ab, const double 
 static void solve(const Problem *P, const double *ab, const double *rhs, double *x)
 {
     solve_lanes(P, &ab, &rhs, &x, 1);
-}
-
-/* tr(inv(A) R) from A = U^T D U, by Takahashi's backward recursion over a bw x bw window
- * X of inv(A): row i of the inverse is -X c beyond the diagonal (c = U[i, i + 1 ..]) and
- * 1 / D[i] + c . X c on it (Hutchinson & de Hoog 1985). */
-INLINE void trace_bw(const Problem *P, const double *const *ab, double *out, const int lanes,
-                     const int bw)
-{
-    const int ld = bw + 1;
-    const Py_ssize_t n = P->rows;
-    double win[LANES][MAXBW][MAXBW], next[MAXBW][MAXBW], c[MAXBW], y[MAXBW];
-    /* the terms of the trace summed with Neumaier's compensation (n - trace cancels) */
-    double acc[LANES], comp[LANES];
-    for (int q = 0; q < lanes; q++) {
-        acc[q] = comp[q] = 0.0;
-        for (int a = 0; a < bw; a++) {
-            for (int b = 0; b < bw; b++) {
-                win[q][a][b] = 0.0;
-            }
-        }
-    }
-    for (Py_ssize_t i = n - 1; i >= 0; i--) {
-        for (int q = 0; q < lanes; q++) {
-            for (int a = 0; a < bw; a++) {
-                Py_ssize_t jj = i + 1 + a;
-                c[a] = jj < n ? ab[q][jj * ld + bw - (a + 1)] : 0.0;
-            }
-            /* y = X c: minus row i of the inverse beyond the diagonal */
-            for (int a = 0; a < bw; a++) {
-                double s = 0.0;
-                for (int b = 0; b < bw; b++) {
-                    s += win[q][a][b] * c[b];
-                }
-                y[a] = s;
-            }
-            double corner = ab[q][i * ld + bw];
-            for (int a = 0; a < bw; a++) {
-                corner += c[a] * y[a];
-            }
-            double term = corner * P->r[i * ld + bw];
-            for (int a = 0; a < bw; a++) {
-                Py_ssize_t jj = i + 1 + a;
-                if (jj < n) {
-                    /* R[i, i + 1 + a] counts twice (both triangles) */
-                    term -= 2.0 * y[a] * P->r[jj * ld + bw - (a + 1)];
-                }
-            }
-            const double sum = acc[q] + term;
-            comp[q] += fabs(acc[q]) >= fabs(term) ? (acc[q] - sum) + term : (term - sum) + acc[q];
-            acc[q] = sum;
-            next[0][0] = corner;
-            for (int a = 1; a < bw; a++) {
-                next[0][a] = -y[a - 1];
-                next[a][0] = -y[a - 1];
-                for (int b = 1; b < bw; b++) {
-                    next[a][b] = win[q][a - 1][b - 1];
-                }
-            }
-            for (int a = 0; a < bw; a++) {
-                for (int b = 0; b < bw; b++) {
-                    win[q][a][b] = next[a][b];
-                }
-            }
-        }
-    }
-    for (int q = 0; q < lanes; q++) {
-        out[q] = acc[q] + comp[q];
-    }
-}
-
-static void trace_lanes(const Problem *P, const double *const *ab, double *out, int lanes)
-{
-    BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, out, LN, BW)));
-}
-
-static double trace(const Problem *P, const double *ab)
-{
-    double out = 0.0;
-    trace_lanes(P, &ab, &out, 1);
-    return out;
 }
 
 /* numpy's pairwise summation (its order of additions for float64). */
@@ -341,6 +318,199 @@ static double pairwise(const double *a, Py_ssize_t n)
     Py_ssize_t n2 = n / 2;
     n2 -= n2 % 8;
     return pairwise(a, n2) + pairwise(a + n2, n - n2);
+}
+
+/* Row i's -U[i, i + 1 + a] / U[i, i] (a < bw) and 1 / U[i, i]^2 as _takahashi's load
+ * computes them; zero past the end (i >= n, or i + 1 + a >= n). */
+INLINE void coupling_at(const double *ab, Py_ssize_t n, Py_ssize_t i, double *negc,
+                        double *source, const int bw)
+{
+    const int ld = bw + 1;
+    if (i >= n) {
+        for (int a = 0; a < bw; a++) {
+            negc[a] = 0.0;
+        }
+        *source = 0.0;
+        return;
+    }
+    const double d = ab[i * ld + bw];
+    for (int a = 0; a < bw; a++) {
+        const Py_ssize_t jj = i + 1 + a;
+        negc[a] = jj < n ? -(ab[jj * ld + bw - (a + 1)] / d) : 0.0;
+    }
+    *source = 1.0 / (d * d);
+}
+
+/* _takahashi._companion_step on one window: X <- T X T^T + source e1 e1^T, with
+ * ny = X (-c) (row i of the inverse beyond the diagonal) left in ny. */
+INLINE void companion(double (*X)[MAXBW], const double *negc, double source, double *ny,
+                      const int bw)
+{
+    for (int a = 0; a < bw; a++) {
+        double sum = X[a][0] * negc[0];
+        for (int b = 1; b < bw; b++) {
+            sum += X[a][b] * negc[b];
+        }
+        ny[a] = sum;
+    }
+    double corner = source;
+    for (int a = 0; a < bw; a++) {
+        corner += negc[a] * ny[a];
+    }
+    for (int a = bw - 1; a > 0; a--) {
+        for (int b = bw - 1; b > 0; b--) {
+            X[a][b] = X[a - 1][b - 1];
+        }
+    }
+    X[0][0] = corner;
+    for (int a = 1; a < bw; a++) {
+        X[0][a] = ny[a - 1];
+        X[a][0] = ny[a - 1];
+    }
+}
+
+/* tr(inv(A) R) of lanes' factors by _takahashi's block recursion (Hutchinson & de Hoog
+ * 1985): sums[q] holds lane q's per-block sums (P->blocks). The blocks run last first:
+ * block b from its end window (its terms summed in order), then block b's map
+ * X -> phi X phi^T + psi composed from its steps gives block b - 1's end window. */
+INLINE void trace_bw(const Problem *P, const double *const *ab, double *const *sums,
+                     double *out, double *const *x, const int lanes, const int bw,
+                     const int solving)
+{
+    const int ld = bw + 1;
+    const Py_ssize_t n = P->rows, length = P->length;
+    double win[LANES][MAXBW][MAXBW], phi[LANES][MAXBW][MAXBW], psi[LANES][MAXBW][MAXBW];
+    double end[LANES][MAXBW][MAXBW], left[MAXBW][MAXBW];
+    double negc[MAXBW], ny[MAXBW], ro[MAXBW];
+    /* with `solving`, solve_bw's backward half in the same sweep (i descending): zb[q][a]
+     * is the solution at i + 1 + a (zero past the end) */
+    double zb[LANES][MAXBW];
+    for (int q = 0; q < lanes; q++) {
+        for (int a = 0; a < bw; a++) {
+            zb[q][a] = 0.0;
+        }
+        for (int a = 0; a < bw; a++) {
+            for (int b = 0; b < bw; b++) {
+                end[q][a][b] = 0.0;
+            }
+        }
+    }
+    for (Py_ssize_t blk = P->blocks - 1; blk >= 0; blk--) {
+        for (int q = 0; q < lanes; q++) {
+            for (int a = 0; a < bw; a++) {
+                for (int b = 0; b < bw; b++) {
+                    win[q][a][b] = end[q][a][b];
+                    phi[q][a][b] = a == b ? 1.0 : 0.0;
+                    psi[q][a][b] = 0.0;
+                }
+            }
+        }
+        double acc[LANES];
+        for (int q = 0; q < lanes; q++) {
+            acc[q] = 0.0;
+        }
+        for (Py_ssize_t j = length - 1; j >= 0; j--) {
+            const Py_ssize_t i = blk * length + j;
+            /* R's band at i, the off-diagonals doubled (both triangles) */
+            const double rd = i < n ? P->r[i * ld + bw] * 1.0 : 0.0;
+            for (int a = 0; a < bw; a++) {
+                const Py_ssize_t jj = i + 1 + a;
+                ro[a] = jj < n ? P->r[jj * ld + bw - (a + 1)] * 2.0 : 0.0;
+            }
+            for (int q = 0; q < lanes; q++) {
+                if (solving && i < n) {
+                    double temp = x[q][i];
+                    for (int a = bw - 1; a >= 0; a--) {
+                        if (i + 1 + a < n) {
+                            temp = FMA(-zb[q][a], ab[q][(i + 1 + a) * ld + bw - (a + 1)], temp);
+                        }
+                    }
+                    temp /= ab[q][i * ld + bw];
+                    for (int a = bw - 1; a > 0; a--) {
+                        zb[q][a] = zb[q][a - 1];
+                    }
+                    zb[q][0] = temp;
+                    x[q][i] = temp;
+                }
+                double source;
+                coupling_at(ab[q], n, i, negc, &source, bw);
+                /* the trace's terms at i, in the twin's order */
+                companion(win[q], negc, source, ny, bw);
+                acc[q] += win[q][0][0] * rd;
+                for (int a = 0; a < bw; a++) {
+                    acc[q] += ny[a] * ro[a];
+                }
+                if (blk == 0) {
+                    continue; /* no block before the first: its map is not needed */
+                }
+                /* the block's map: phi <- T phi, psi <- T psi T^T + source e1 e1^T */
+                for (int b = 0; b < bw; b++) {
+                    double sum = phi[q][0][b] * negc[0];
+                    for (int a = 1; a < bw; a++) {
+                        sum += phi[q][a][b] * negc[a];
+                    }
+                    ny[b] = sum;
+                }
+                for (int a = bw - 1; a > 0; a--) {
+                    for (int b = 0; b < bw; b++) {
+                        phi[q][a][b] = phi[q][a - 1][b];
+                    }
+                }
+                for (int b = 0; b < bw; b++) {
+                    phi[q][0][b] = ny[b];
+                }
+                companion(psi[q], negc, source, ny, bw);
+            }
+        }
+        for (int q = 0; q < lanes; q++) {
+            sums[q][blk] = acc[q];
+            if (blk == 0) {
+                continue;
+            }
+            /* block blk - 1's end: phi end phi^T + psi (numpy's matmul of these strided
+             * bw x bw stacks: each entry fused multiply-adds in order from zero, checked) */
+            for (int a = 0; a < bw; a++) {
+                for (int c = 0; c < bw; c++) {
+                    double sum = 0.0;
+                    for (int t = 0; t < bw; t++) {
+                        sum = FMA(phi[q][a][t], end[q][t][c], sum);
+                    }
+                    left[a][c] = sum;
+                }
+            }
+            for (int a = 0; a < bw; a++) {
+                for (int c = 0; c < bw; c++) {
+                    double sum = 0.0;
+                    for (int t = 0; t < bw; t++) {
+                        sum = FMA(left[a][t], phi[q][c][t], sum);
+                    }
+                    end[q][a][c] = sum + psi[q][a][c];
+                }
+            }
+        }
+    }
+    for (int q = 0; q < lanes; q++) {
+        out[q] = pairwise(sums[q], P->blocks);
+    }
+}
+
+/* The traces of the lanes; with x (not NULL, forward solutions) the backward solves too. */
+FMA_CLONES static void trace_lanes(const Problem *P, const double *const *ab,
+                                   double *const *sums, double *out, double *const *x,
+                                   int lanes)
+{
+    if (x != NULL) {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, sums, out, x, LN, BW, 1)));
+    } else {
+        BY_LANES(lanes, BY_BANDWIDTH(P->m, trace_bw(P, ab, sums, out, x, LN, BW, 0)));
+    }
+}
+
+static double trace(const Problem *P, const double *ab, double *sums)
+{
+    double out = 0.0;
+    trace_lanes(P, &ab, &sums, &out, NULL, 1);
+    return out;
 }
 
 /* Q^T y for one channel. */
@@ -411,11 +581,26 @@ static double residual_sum(const Residuals *R, Py_ssize_t i0, Py_ssize_t n)
 }
 
 /* sum(w (y - f)^2) with f = y - p (m!)^2 W^-1 Q delta; f written to fitted (stride) if given. */
+/* the same terms added one after the other (numpy's sum over the rows of an (n, k > 1)
+ * array, as the twin's statistics sums several channels at once) */
+static double residual_sum_in_order(const Residuals *R)
+{
+    double terms[128], sum = 0.0;
+    for (Py_ssize_t i0 = 0; i0 < R->P->n; i0 += 128) {
+        const Py_ssize_t count = R->P->n - i0 < 128 ? R->P->n - i0 : 128;
+        BY_BANDWIDTH(R->P->m, residual_terms_bw(R, i0, count, terms, BW));
+        for (Py_ssize_t i = 0; i < count; i++) {
+            sum += terms[i];
+        }
+    }
+    return sum;
+}
+
 static double residuals(const Problem *P, double p, const double *y, const double *delta,
-                        double *fitted, Py_ssize_t stride)
+                        double *fitted, Py_ssize_t stride, int in_order)
 {
     const Residuals R = {P, p * P->fact2, y, delta, fitted, stride};
-    return residual_sum(&R, 0, P->n);
+    return in_order ? residual_sum_in_order(&R) : residual_sum(&R, 0, P->n);
 }
 
 /* Channel ch's samples into work->col (y itself for one channel) and Q^T of them into
@@ -447,9 +632,9 @@ static double criterion(const Problem *P, double rss, double rdof)
 }
 
 /* n - dof, floored at the smallest normal number, from the factor. */
-static double residual_dof(const Problem *P, const double *ab)
+static double residual_dof(const Problem *P, const Work *wk)
 {
-    double rdof = (double)P->rows - trace(P, ab);
+    double rdof = (double)P->rows - trace(P, wk->ab, wk->sums);
     return rdof > DBL_MIN ? rdof : DBL_MIN;
 }
 
@@ -459,7 +644,7 @@ static void evaluate_lanes(const Problem *P, Work *const *wk, const double *log_
                            int lanes)
 {
     double p[LANES], rdof[LANES];
-    double *ab[LANES], *delta[LANES];
+    double *ab[LANES], *delta[LANES], *sums[LANES];
     const double *abc[LANES], *rhs[LANES];
     Py_ssize_t fail[LANES];
     for (int q = 0; q < lanes; q++) {
@@ -468,16 +653,18 @@ static void evaluate_lanes(const Problem *P, Work *const *wk, const double *log_
         abc[q] = wk[q]->ab;
         rhs[q] = wk[q]->rhs;
         delta[q] = wk[q]->delta;
+        sums[q] = wk[q]->sums;
     }
-    factor_lanes(P, p, ab, fail, lanes);
-    solve_lanes(P, abc, rhs, delta, lanes);
-    trace_lanes(P, abc, rdof, lanes);
+    /* the factor with the forward solve, the trace with the backward one: the solves'
+     * chains overlap the others' (each lane's arithmetic that of factor, solve, trace) */
+    factor_lanes(P, p, ab, fail, rhs, delta, lanes);
+    trace_lanes(P, abc, sums, rdof, delta, lanes);
     for (int q = 0; q < lanes; q++) {
         if (fail[q] != 0) {
             f[q] = INFINITY;
             continue;
         }
-        const double rss = residuals(P, p[q], wk[q]->col, wk[q]->delta, NULL, 0);
+        const double rss = residuals(P, p[q], wk[q]->col, wk[q]->delta, NULL, 0, 0);
         double rd = (double)P->rows - rdof[q];
         f[q] = criterion(P, rss, rd > DBL_MIN ? rd : DBL_MIN);
     }
@@ -624,8 +811,8 @@ static void finish(Refine *R, Work *wk, Py_ssize_t ch, double chosen)
         return;
     }
     solve(P, wk->ab, wk->rhs, wk->delta);
-    R->rss[ch] = residuals(P, p, wk->col, wk->delta, R->fitted + ch, P->k);
-    R->rdof[ch] = residual_dof(P, wk->ab);
+    R->rss[ch] = residuals(P, p, wk->col, wk->delta, R->fitted + ch, P->k, 0);
+    R->rdof[ch] = residual_dof(P, wk);
 }
 
 /* The next channel with a search into the lane (0 when none is left); channels without
@@ -695,101 +882,6 @@ static void refine(Refine *R, Work *wks, int lanes)
     }
 }
 
-/* ------------------------------------------------------------ the bands */
-
-/* Divided differences q (rows, m + 1), Q^T W^-1 Q and R in band columns (rows, m + 1),
- * with the operations of _banded.divided_differences, qwq_band and bspline_gram_band:
- * R's Gauss sums per sample interval (nodes, weights: Gauss-Legendre, m points), the
- * B-spline values by Cox-de Boor on knots x padded by m - 1 steps each side. */
-static void bands(const double *x, const double *winv, Py_ssize_t n, int m, const double *nodes,
-                  const double *weights, double *q, double *qwq, double *r)
-{
-    enum { MAXM = 9 };
-    const int ld = m + 1, degree = m - 1;
-    const Py_ssize_t rows = n - m;
-    for (Py_ssize_t j = 0; j < rows; j++) {
-        for (int a = 0; a <= m; a++) {
-            double v = 1.0;
-            for (int b = 0; b <= m; b++) {
-                if (a != b) {
-                    v /= x[j + a] - x[j + b];
-                }
-            }
-            q[j * ld + a] = v;
-        }
-    }
-    for (Py_ssize_t i = 0; i < rows * ld; i++) {
-        qwq[i] = 0.0;
-        r[i] = 0.0;
-    }
-    /* entry (j, j + d) of Q^T W^-1 Q, at [j + d, m - d] */
-    for (int d = 0; d <= m; d++) {
-        for (Py_ssize_t j = 0; j + d < rows; j++) {
-            double acc = 0.0;
-            for (int a = d; a <= m; a++) {
-                acc += q[j * ld + a] * q[(j + d) * ld + a - d] * winv[j + a];
-            }
-            qwq[(j + d) * ld + m - d] = acc;
-        }
-    }
-    /* knots[k] for k in 0 .. n + 2m - 3: x padded by m - 1 steps of the end intervals */
-#define KNOT(k)                                                                                \
-    ((k) < degree ? x[0] - (double)(degree - (k)) * (x[1] - x[0])                              \
-                  : ((k) - degree < n ? x[(k) - degree]                                        \
-                                      : x[n - 1] + (double)((k) - degree - n + 1) *            \
-                                                       (x[n - 1] - x[n - 2])))
-    /* intervals last first: each band entry then adds its pairs in the twin's order */
-    for (Py_ssize_t i = n - 2; i >= 0; i--) {
-        const double h = x[i + 1] - x[i];
-        const double mid = 0.5 * (x[i + 1] + x[i]), half = 0.5 * h;
-        double vals[MAXM][MAXM]; /* vals[s][g]: B-spline i - m + 1 + s at point g */
-        double pts[MAXM], qw[MAXM];
-        for (int g = 0; g < m; g++) {
-            pts[g] = mid + half * nodes[g];
-            qw[g] = half * weights[g];
-            vals[0][g] = 1.0;
-        }
-        for (int rr = 1; rr <= degree; rr++) {
-            for (int g = 0; g < m; g++) {
-                double saved = 0.0, nxt[MAXM];
-                for (int s2 = 0; s2 < rr; s2++) {
-                    const double right = KNOT(degree + s2 + 1 + i) - pts[g];
-                    const double left = pts[g] - KNOT(degree + s2 + 1 - rr + i);
-                    const double term = vals[s2][g] / (right + left);
-                    nxt[s2] = saved + right * term;
-                    saved = left * term;
-                }
-                nxt[rr] = saved;
-                for (int s2 = 0; s2 <= rr; s2++) {
-                    vals[s2][g] = nxt[s2];
-                }
-            }
-        }
-        for (int a = 0; a < m; a++) {
-            const Py_ssize_t j = i - (m - 1) + a; /* the row of B-spline a */
-            for (int b = a; b < m; b++) {
-                const int d = b - a;
-                if (j < 0 || j + d >= rows) {
-                    continue;
-                }
-                double sum = 0.0;
-                for (int g = 0; g < m; g++) {
-                    sum += qw[g] * vals[a][g] * vals[b][g];
-                }
-                r[(j + d) * ld + m - d] += sum;
-            }
-        }
-    }
-#undef KNOT
-    for (Py_ssize_t j = 0; j < rows; j++) {
-        const double sj = (double)m / (x[j + m] - x[j]);
-        for (int d = 0; d <= m && j + d < rows; d++) {
-            const double sd = (double)m / (x[j + d + m] - x[j + d]);
-            r[(j + d) * ld + m - d] *= sj * sd;
-        }
-    }
-}
-
 /* ------------------------------------------------------------ Python glue */
 
 static int work_alloc(const Problem *P, Work *wk)
@@ -798,7 +890,8 @@ static int work_alloc(const Problem *P, Work *wk)
     wk->buffer = P->k > 1 ? malloc(sizeof(double) * (size_t)P->n) : NULL;
     wk->rhs = malloc(sizeof(double) * (size_t)P->rows);
     wk->delta = malloc(sizeof(double) * (size_t)P->rows);
-    return wk->ab && (wk->buffer || P->k == 1) && wk->rhs && wk->delta;
+    wk->sums = malloc(sizeof(double) * (size_t)P->blocks);
+    return wk->ab && (wk->buffer || P->k == 1) && wk->rhs && wk->delta && wk->sums;
 }
 
 static void work_free(Work *wk)
@@ -807,6 +900,7 @@ static void work_free(Work *wk)
     free(wk->buffer);
     free(wk->rhs);
     free(wk->delta);
+    free(wk->sums);
 }
 
 /* A contiguous float64 buffer of exactly `count` items; writable if asked. */
@@ -843,6 +937,10 @@ static int get_problem(PyObject *const *objs, int m, Py_ssize_t n, Py_ssize_t k,
     P->k = k;
     P->m = m;
     P->fact2 = fact2;
+    /* _takahashi._BlockLayout: ceil(sqrt(rows)) samples per block */
+    Py_ssize_t length = (Py_ssize_t)ceil(sqrt((double)P->rows));
+    P->length = length < 1 ? 1 : (length > P->rows ? P->rows : length);
+    P->blocks = (P->rows + P->length - 1) / P->length;
     Py_ssize_t counts[B_COUNT] = {P->rows * (m + 1), P->rows * (m + 1), P->rows * (m + 1),
                                   n,                 n,                 n * k,
                                   n * k};
@@ -873,7 +971,8 @@ PyDoc_STRVAR(fit_doc,
              "fit(q, r, qwq, w, winv, y, fitted, rss, m, n, k, p, fact2, want_trace)\n"
              "--\n\n"
              "Fit the k channels of y (n, k) at smoothing parameter p: fitted values into\n"
-             "fitted (n, k), sum(w r^2) of each channel into rss (k,). Returns n - m - trace\n"
+             "fitted (n, k), sum(w r^2) of each channel into rss (k,) (numpy's order: pairwise\n"
+             "for one channel, in order for several). Returns n - m - trace\n"
              "(n - dof, floored at the smallest normal float) when want_trace, else 0.0;\n"
              "None when the banded matrix is not positive definite.");
 
@@ -906,15 +1005,26 @@ static PyObject *gcv_fit(PyObject *self, PyObject *args)
         const double *y = views[B_Y].buf;
         double *fitted = views[B_OUT].buf, *rss = rss_view.buf;
         Py_BEGIN_ALLOW_THREADS;
-        failed = factor(&P, p, wk.ab);
-        if (failed == 0) {
+        if (k == 1 && want_trace) {
+            /* one channel: the solves fused into the factor and the trace */
+            double *ab = wk.ab, *delta = wk.delta, *sums = wk.sums, tr = 0.0;
+            const double *abc = wk.ab, *rhs = wk.rhs;
+            load_channel(&P, y, 0, &wk);
+            factor_lanes(&P, &p, &ab, &failed, &rhs, &delta, 1);
+            if (failed == 0) {
+                trace_lanes(&P, &abc, &sums, &tr, &delta, 1);
+                rss[0] = residuals(&P, p, wk.col, wk.delta, fitted, 1, 0);
+                rdof = (double)P.rows - tr;
+                rdof = rdof > DBL_MIN ? rdof : DBL_MIN;
+            }
+        } else if ((failed = factor(&P, p, wk.ab)) == 0) {
             for (Py_ssize_t ch = 0; ch < k; ch++) {
                 load_channel(&P, y, ch, &wk);
                 solve(&P, wk.ab, wk.rhs, wk.delta);
-                rss[ch] = residuals(&P, p, wk.col, wk.delta, fitted + ch, k);
+                rss[ch] = residuals(&P, p, wk.col, wk.delta, fitted + ch, k, k > 1);
             }
             if (want_trace) {
-                rdof = residual_dof(&P, wk.ab);
+                rdof = residual_dof(&P, &wk);
             }
         }
         Py_END_ALLOW_THREADS;
@@ -991,7 +1101,13 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
         double *rdof = extra[3].buf;
         Py_BEGIN_ALLOW_THREADS;
         /* 1. the scan: one factor and one trace per grid point for all channels */
-        for (Py_ssize_t g = 0; g < g_count; g++) {
+        for (Py_ssize_t g = 0; g < g_count && k == 1; g++) {
+            /* one channel: the solves fused into the factor and the trace */
+            Work *one = &wk[0];
+            load_channel(&P, y, 0, one);
+            evaluate_lanes(&P, &one, &grid[g], &values[g], 1);
+        }
+        for (Py_ssize_t g = 0; g < g_count && k > 1; g++) {
             const double p = pow(10.0, grid[g]);
             if (factor(&P, p, wk[0].ab) != 0) {
                 for (Py_ssize_t ch = 0; ch < k; ch++) {
@@ -999,12 +1115,23 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
                 }
                 continue;
             }
-            const double rd = residual_dof(&P, wk[0].ab);
-            for (Py_ssize_t ch = 0; ch < k; ch++) {
-                load_channel(&P, y, ch, &wk[0]);
-                solve(&P, wk[0].ab, wk[0].rhs, wk[0].delta);
-                double s = residuals(&P, p, wk[0].col, wk[0].delta, NULL, 0);
-                values[g * k + ch] = criterion(&P, s, rd);
+            const double rd = residual_dof(&P, &wk[0]);
+            /* the channels' solves two at a time through the one factor */
+            for (Py_ssize_t ch = 0; ch < k; ch += LANES) {
+                const int count = k - ch < LANES ? (int)(k - ch) : LANES;
+                const double *abs[LANES], *rhs[LANES];
+                double *delta[LANES];
+                for (int q = 0; q < count; q++) {
+                    load_channel(&P, y, ch + q, &wk[q]);
+                    abs[q] = wk[0].ab;
+                    rhs[q] = wk[q].rhs;
+                    delta[q] = wk[q].delta;
+                }
+                solve_lanes(&P, abs, rhs, delta, count);
+                for (int q = 0; q < count; q++) {
+                    double s = residuals(&P, p, wk[q].col, wk[q].delta, NULL, 0, 0);
+                    values[g * k + ch + q] = criterion(&P, s, rd);
+                }
             }
         }
         /* 2. each channel's refinement, two channels side by side, then its fit */
@@ -1025,48 +1152,9 @@ static PyObject *gcv_search(PyObject *self, PyObject *args)
     return PyLong_FromSsize_t(failures);
 }
 
-PyDoc_STRVAR(bands_doc, "bands(x, winv, nodes, weights, q, qwq, r, m, n)\n"
-                        "--\n\n"
-                        "The divided differences q (n - m, m + 1) and the bands of Q^T W^-1 Q\n"
-                        "and R (n - m, m + 1, band columns) of samples x (n,), weights 1/winv,\n"
-                        "written into q, qwq and r; nodes and weights: m-point Gauss-Legendre.");
-
-static PyObject *gcv_bands(PyObject *self, PyObject *args)
-{
-    PyObject *objs[7];
-    int m;
-    Py_ssize_t n;
-    (void)self;
-    if (!PyArg_ParseTuple(args, "OOOOOOOin:bands", &objs[0], &objs[1], &objs[2], &objs[3],
-                          &objs[4], &objs[5], &objs[6], &m, &n)) {
-        return NULL;
-    }
-    if (m < 1 || m > 8 || n < m + 2) {
-        PyErr_SetString(PyExc_ValueError, "need 1 <= m <= 8 and n >= m + 2");
-        return NULL;
-    }
-    static const char *names[7] = {"x", "winv", "nodes", "weights", "q", "qwq", "r"};
-    const Py_ssize_t band = (n - m) * (m + 1);
-    const Py_ssize_t counts[7] = {n, n, m, m, band, band, band};
-    Py_buffer views[7];
-    for (int i = 0; i < 7; i++) {
-        if (get_buffer(objs[i], &views[i], counts[i], i >= 4, names[i]) != 0) {
-            release(views, i);
-            return NULL;
-        }
-    }
-    Py_BEGIN_ALLOW_THREADS;
-    bands(views[0].buf, views[1].buf, n, m, views[2].buf, views[3].buf, views[4].buf,
-          views[5].buf, views[6].buf);
-    Py_END_ALLOW_THREADS;
-    release(views, 7);
-    Py_RETURN_NONE;
-}
-
 static PyMethodDef methods[] = {
     {"fit", gcv_fit, METH_VARARGS, fit_doc},
     {"search", gcv_search, METH_VARARGS, search_doc},
-    {"bands", gcv_bands, METH_VARARGS, bands_doc},
     {NULL, NULL, 0, NULL},
 };
 

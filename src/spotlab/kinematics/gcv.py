@@ -38,6 +38,8 @@ FloatArray = NDArray[np.float64]
 
 #: The compiled kernel (``_c_gcv.c``); without it the numpy code here is its twin.
 KERNEL = "spotlab.kinematics._c_gcv"
+#: The compiled bands (``_c_bands.c``); without it ``_banded``'s twins make them.
+BANDS_KERNEL = "spotlab.kinematics._c_bands"
 
 
 @dataclass(frozen=True)
@@ -94,14 +96,15 @@ class PenalisedSpline:
         self.winv = 1.0 / w
         self.n_eff = x.size
         self.kernel = native.load(KERNEL)
-        if self.kernel is not None:
+        bands = native.load(BANDS_KERNEL)
+        if bands is not None:
             # the kernel writes the bands column after column: their transposes are
             # LAPACK's column-major band layout, as the twin keeps them
             rows = x.size - m
             self.q = np.empty((rows, m + 1))
             qwq, r = np.empty((rows, m + 1)), np.empty((rows, m + 1))
             nodes, weights = leggauss(m)
-            self.kernel.bands(
+            bands.bands(
                 np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(self.winv),
                 nodes, weights, self.q, qwq, r, m, x.size,
             )  # fmt: skip

@@ -1,11 +1,11 @@
 """The compiled GCV kernel (_c_gcv.c) against its numpy twin and against dense algebra.
 
-At a given p (fixed p, each evaluation) the two agree to 1e-9 relative. A GCV search
-ends where its bounded Brent steps stop (xatol 1e-6 in log10 p), on a criterion that
-is flat there to ~1e-12: the two arithmetics (LDL^T and Takahashi in C, LAPACK's LL^T
-and the block recursion in numpy) round differently by ~1e-13, so the searches stop
-at points of equal GCV (to 1e-9) whose p differ by up to ~1e-5 relative; values and
-figures at them differ accordingly (checked to the tolerances below).
+The tolerances here hold on any machine: at a given p the two agree to 1e-9 relative,
+and searches end at points of equal GCV (to 1e-9). Where the twin's BLAS and numpy
+fuse multiply-adds (FMA processors, the usual case) the kernel is the twin to the last
+bit and the searches stop at the same p (test_spline_bitwise); elsewhere the two round
+differently by ~1e-13, and on the flat GCV minimum the p found may then differ by up to
+~1e-5 relative, with values and figures differing accordingly (the tolerances below).
 """
 
 from __future__ import annotations
