@@ -199,28 +199,31 @@ def test_bad_arrays_raise_value_errors() -> None:
 
 
 def test_the_kernel_lets_other_threads_run() -> None:
-    """While one thread is in a long kernel call, another keeps running (GIL released)."""
+    """While one thread is in a long kernel call, another keeps running (GIL released).
+
+    Counted, not timed: this thread ticks while the other is inside its call (between
+    the instants taken just before and just after it). Holding the interpreter lock for
+    the whole call, the kernel would leave no tick inside; on a busy machine there are
+    fewer, but not none.
+    """
     t, y = _signals(50_000, 1, seed=2)
     problem = PenalisedSpline(t, np.ones(t.size), 3)
-    start = time.perf_counter()
-    gcv.gcv_fit(problem, y)  # one kernel call: the whole search (~0.1 s)
-    one_call = time.perf_counter() - start
-    done = threading.Event()
+    call: list[float] = []
 
     def work() -> None:
-        gcv.gcv_fit(problem, y)
-        done.set()
+        call.append(time.perf_counter())
+        gcv.gcv_fit(problem, y)  # one kernel call: the whole search (~0.1 s)
+        call.append(time.perf_counter())
 
     worker = threading.Thread(target=work)
-    ticks = [time.perf_counter()]
+    ticks = []
     worker.start()
-    while not done.is_set():
+    while worker.is_alive():
         time.sleep(0.001)
         ticks.append(time.perf_counter())
     worker.join()
-    # with the GIL held, this thread would wait the whole call between two ticks
-    assert len(ticks) > 3
-    assert max(np.diff(ticks)) < 0.5 * one_call
+    inside = [tick for tick in ticks if call[0] < tick < call[1]]
+    assert len(inside) >= 3, (len(inside), len(ticks), call[1] - call[0])
 
 
 @pytest.mark.parametrize(("n", "k", "degree"), [(6, 1, 5), (4, 2, 3), (500, 3, 5), (300, 2, 3)])
