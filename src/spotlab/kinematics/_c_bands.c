@@ -14,6 +14,8 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include "_buffers.h"
+
 #include <string.h>
 
 /* Divided differences q (rows, m + 1), Q^T W^-1 Q and R in band columns (rows, m + 1),
@@ -110,31 +112,6 @@ static void bands(const double *x, const double *winv, Py_ssize_t n, int m, cons
 }
 
 /* ------------------------------------------------------------ Python glue */
-
-/* A contiguous float64 buffer of exactly `count` items; writable if asked. */
-static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t count, int writable,
-                      const char *name)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) != 0) {
-        return -1;
-    }
-    if (view->itemsize != (Py_ssize_t)sizeof(double) || view->format == NULL ||
-        strcmp(view->format, "d") != 0 || view->len != count * (Py_ssize_t)sizeof(double)) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd contiguous float64 values", name,
-                     count);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
-static void release(Py_buffer *views, int count)
-{
-    for (int i = 0; i < count; i++) {
-        PyBuffer_Release(&views[i]);
-    }
-}
 
 PyDoc_STRVAR(bands_doc, "bands(x, winv, nodes, weights, q, qwq, r, m, n)\n"
                         "--\n\n"

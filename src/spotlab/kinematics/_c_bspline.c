@@ -13,6 +13,8 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include "_buffers.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -198,44 +200,6 @@ static void evaluate(const double *t, const double *c, Py_ssize_t nc, int k, Py_
 }
 
 /* ------------------------------------------------------------ Python glue */
-
-static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t count, int writable,
-                      const char *name)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) != 0) {
-        return -1;
-    }
-    if (view->itemsize != (Py_ssize_t)sizeof(double) || view->format == NULL ||
-        strcmp(view->format, "d") != 0 || view->len != count * (Py_ssize_t)sizeof(double)) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd contiguous float64 values", name,
-                     count);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
-static int get_buffers(PyObject **objs, Py_buffer *views, const Py_ssize_t *counts,
-                       const char *const *names, int count, int first_writable)
-{
-    for (int i = 0; i < count; i++) {
-        if (get_buffer(objs[i], &views[i], counts[i], i >= first_writable, names[i]) != 0) {
-            for (int j = 0; j < i; j++) {
-                PyBuffer_Release(&views[j]);
-            }
-            return -1;
-        }
-    }
-    return 0;
-}
-
-static void release(Py_buffer *views, int count)
-{
-    for (int i = 0; i < count; i++) {
-        PyBuffer_Release(&views[i]);
-    }
-}
 
 PyDoc_STRVAR(natural_doc, "natural(t, x, f, c, n, k, nch)\n"
                           "--\n\n"

@@ -22,6 +22,8 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include "_buffers.h"
+
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
@@ -903,24 +905,6 @@ static void work_free(Work *wk)
     free(wk->sums);
 }
 
-/* A contiguous float64 buffer of exactly `count` items; writable if asked. */
-static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t count, int writable,
-                      const char *name)
-{
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) != 0) {
-        return -1;
-    }
-    if (view->itemsize != (Py_ssize_t)sizeof(double) || view->format == NULL ||
-        strcmp(view->format, "d") != 0 || view->len != count * (Py_ssize_t)sizeof(double)) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd contiguous float64 values", name,
-                     count);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
-
 enum { B_Q, B_R, B_QWQ, B_W, B_WINV, B_Y, B_OUT, B_COUNT };
 
 /* Parse the problem's arrays (q, r, qwq, w, winv, y, fitted) into P and views. */
@@ -958,13 +942,6 @@ static int get_problem(PyObject *const *objs, int m, Py_ssize_t n, Py_ssize_t k,
     P->w = views[B_W].buf;
     P->winv = views[B_WINV].buf;
     return 0;
-}
-
-static void release(Py_buffer *views, int count)
-{
-    for (int i = 0; i < count; i++) {
-        PyBuffer_Release(&views[i]);
-    }
 }
 
 PyDoc_STRVAR(fit_doc,
