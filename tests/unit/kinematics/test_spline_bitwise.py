@@ -12,17 +12,13 @@ the agreement to 1e-9 everywhere).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import TypeVar
-
 import numpy as np
 import pytest
+from _spline_twins import signals, twin_and_kernel
 
 from spotlab.core import native
 from spotlab.kinematics import SmoothingSpline, gcv, gcv_batch
 from spotlab.kinematics.gcv import KERNEL, PenalisedSpline
-
-T = TypeVar("T")
 
 
 def _twin_fuses() -> bool:
@@ -50,30 +46,14 @@ pytestmark = [
 ]
 
 
-def _twin_and_kernel(make: Callable[[], T], monkeypatch: pytest.MonkeyPatch) -> tuple[T, T]:
-    """``make()`` once with the numpy twin, once with the kernel."""
-    monkeypatch.setenv(native.NO_NATIVE_ENV, "1")
-    twin = make()
-    monkeypatch.setenv(native.NO_NATIVE_ENV, "0")
-    return twin, make()
-
-
-def _signals(n: int, k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    t = np.cumsum(rng.uniform(0.008, 0.012, n))
-    freq = rng.uniform(0.2, 2.0, k)
-    y = np.sin(2 * np.pi * freq[None, :] * t[:, None]) * rng.uniform(0.5, 50.0, k)
-    return t, y + 10.0 ** rng.uniform(-3.0, -1.0, k) * rng.standard_normal((n, k))
-
-
 @pytest.mark.parametrize(("n", "k"), [(9, 1), (61, 3), (700, 1), (1500, 2)])
 @pytest.mark.parametrize("m", [1, 2, 3, 4])
 def test_the_criterion_at_any_p_is_the_twins_bitwise(
     n: int, k: int, m: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    t, y = _signals(n, k, seed=10 * n + m)
+    t, y = signals(n, k, seed=10 * n + m)
     w = np.random.default_rng(n + m).uniform(0.3, 3.0, n)
-    twin, kernel = _twin_and_kernel(lambda: PenalisedSpline(t, w, m), monkeypatch)
+    twin, kernel = twin_and_kernel(lambda: PenalisedSpline(t, w, m), monkeypatch)
     lo, hi = twin.log_p_range
     # across the whole search range, and densely where a GCV minimum lies
     log_ps = np.concatenate([np.linspace(lo, hi, 9), lo + (hi - lo) * 0.4 + 1e-6 * np.arange(4)])
@@ -96,9 +76,9 @@ def test_the_criterion_at_any_p_is_the_twins_bitwise(
 def test_searches_stop_at_the_twins_p(
     n: int, k: int, m: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    t, y = _signals(n, k, seed=n + m)
+    t, y = signals(n, k, seed=n + m)
     w = np.random.default_rng(n).uniform(0.3, 3.0, n)
-    twin, kernel = _twin_and_kernel(
+    twin, kernel = twin_and_kernel(
         lambda: gcv_batch.gcv_fit_many(PenalisedSpline(t, w, m), y), monkeypatch
     )
     (p_twin, f_twin, s_twin), (p_kernel, f_kernel, s_kernel) = twin, kernel
@@ -112,10 +92,10 @@ def test_searches_stop_at_the_twins_p(
 def test_smoothing_splines_equal_the_twins(
     n: int, degree: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    t, y = _signals(n, 6, seed=n + degree)
+    t, y = signals(n, 6, seed=n + degree)
     y[n // 3 : n // 3 + n // 20 + 1, 1] = np.nan  # a gap: channel 1 alone
     y[n // 2 : n // 2 + 2, 4] = np.nan
-    twin, kernel = _twin_and_kernel(lambda: SmoothingSpline(t, y, degree=degree), monkeypatch)
+    twin, kernel = twin_and_kernel(lambda: SmoothingSpline(t, y, degree=degree), monkeypatch)
     a, b = kernel, twin
     assert isinstance(a, SmoothingSpline) and isinstance(b, SmoothingSpline)
     for name in ("p", "gcv", "dof", "msr", "variance"):
@@ -131,8 +111,8 @@ def test_long_record_searches_equal_the_twins(monkeypatch: pytest.MonkeyPatch) -
     monkeypatch.setattr(gcv, "LONG_RECORD", 1000)
     monkeypatch.setattr(gcv_batch, "LONG_RECORD", 1000)
     monkeypatch.setattr(gcv, "START_SEGMENT_LENGTH", 400)
-    t, y = _signals(3000, 2, seed=5)
-    twin, kernel = _twin_and_kernel(lambda: SmoothingSpline(t, y), monkeypatch)
+    t, y = signals(3000, 2, seed=5)
+    twin, kernel = twin_and_kernel(lambda: SmoothingSpline(t, y), monkeypatch)
     assert isinstance(kernel, SmoothingSpline) and isinstance(twin, SmoothingSpline)
     for name in ("p", "gcv", "dof"):
         assert np.array_equal(getattr(kernel, name), getattr(twin, name)), name

@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
-from typing import TypeVar
 
 import numpy as np
 import pytest
+from _spline_twins import signals, twin_and_kernel
 
 from spotlab.core import native
 from spotlab.kinematics import SmoothingSpline, gcv, gcv_batch
@@ -24,25 +23,8 @@ from spotlab.kinematics.gcv import KERNEL, FitStatistics, PenalisedSpline
 
 REL = 1e-9
 
-T = TypeVar("T")
 
 pytestmark = pytest.mark.skipif(native.load(KERNEL) is None, reason="kernel not built")
-
-
-def _twin_and_kernel(make: Callable[[], T], monkeypatch: pytest.MonkeyPatch) -> tuple[T, T]:
-    """``make()`` once with the numpy twin, once with the kernel."""
-    monkeypatch.setenv(native.NO_NATIVE_ENV, "1")
-    twin = make()
-    monkeypatch.setenv(native.NO_NATIVE_ENV, "0")
-    return twin, make()
-
-
-def _signals(n: int, k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    t = np.cumsum(rng.uniform(0.008, 0.012, n))
-    freq = rng.uniform(0.2, 2.0, k)
-    y = np.sin(2 * np.pi * freq[None, :] * t[:, None]) * rng.uniform(0.5, 50.0, k)
-    return t, y + 10.0 ** rng.uniform(-3.0, -1.0, k) * rng.standard_normal((n, k))
 
 
 def _rel(a: object, b: object) -> float:
@@ -60,7 +42,7 @@ def test_bands_equal_the_twins_bitwise(m: int, monkeypatch: pytest.MonkeyPatch) 
     rng = np.random.default_rng(m)
     x = np.cumsum(rng.uniform(0.5, 1.5, 97))
     w = rng.uniform(0.5, 2.0, x.size)
-    twin, kernel = _twin_and_kernel(lambda: PenalisedSpline(x, w, m), monkeypatch)
+    twin, kernel = twin_and_kernel(lambda: PenalisedSpline(x, w, m), monkeypatch)
     for name in ("q", "r", "qwq"):
         assert np.array_equal(getattr(twin, name), getattr(kernel, name)), name
     assert kernel.r.flags.f_contiguous and kernel.r.shape == (m + 1, x.size - m)
@@ -81,14 +63,14 @@ def test_bands_equal_the_twins_bitwise(m: int, monkeypatch: pytest.MonkeyPatch) 
 def test_fits_at_one_p_equal_the_twins(
     n: int, m: int, ps: tuple[float, ...], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    t, y = _signals(n, 3, seed=n)
+    t, y = signals(n, 3, seed=n)
     w = np.random.default_rng(n).uniform(0.3, 3.0, n)
     for p in ps:
 
         def make(p: float = p) -> tuple[np.ndarray, FitStatistics]:
             return PenalisedSpline(t, w, m).statistics(p, y)
 
-        twin, kernel = _twin_and_kernel(make, monkeypatch)
+        twin, kernel = twin_and_kernel(make, monkeypatch)
         (f_twin, s_twin), (f_kernel, s_kernel) = twin, kernel
         scale = np.max(np.abs(f_twin), axis=0)
         assert np.all(np.max(np.abs(f_kernel - f_twin), axis=0) <= REL * scale), p
@@ -97,7 +79,7 @@ def test_fits_at_one_p_equal_the_twins(
 
 
 def test_trace_equals_the_dense_inverse() -> None:
-    t, y = _signals(120, 1, seed=3)
+    t, y = signals(120, 1, seed=3)
     problem = PenalisedSpline(t, np.ones(t.size), 3)
     for p in (1e-10, 1e-6):
         _, _, rdof = problem.fit(p, y)
@@ -116,9 +98,9 @@ def test_trace_equals_the_dense_inverse() -> None:
 def test_gcv_searches_end_at_the_same_minimum(
     n: int, degree: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    t, y = _signals(n, 4, seed=n + degree)
+    t, y = signals(n, 4, seed=n + degree)
     y[n // 3 : n // 3 + n // 20, 1] = np.nan  # a gap: channel 1 alone
-    twin, kernel = _twin_and_kernel(lambda: SmoothingSpline(t, y, degree=degree), monkeypatch)
+    twin, kernel = twin_and_kernel(lambda: SmoothingSpline(t, y, degree=degree), monkeypatch)
     a, b = kernel, twin
     assert isinstance(a, SmoothingSpline) and isinstance(b, SmoothingSpline)
     assert _rel(a.gcv, b.gcv) <= REL
@@ -130,7 +112,7 @@ def test_gcv_searches_end_at_the_same_minimum(
 
 
 def test_one_channel_search_equals_the_batched_one() -> None:
-    t, y = _signals(500, 3, seed=8)
+    t, y = signals(500, 3, seed=8)
     problem = PenalisedSpline(t, np.ones(t.size), 3)
     ps, fitted, stats = gcv_batch.gcv_fit_many(problem, y, x=t)
     for j in range(3):
@@ -140,7 +122,7 @@ def test_one_channel_search_equals_the_batched_one() -> None:
 
 
 def test_fixed_p_and_wood_jennings_equal_the_twins(monkeypatch: pytest.MonkeyPatch) -> None:
-    t, y = _signals(400, 3, seed=11)
+    t, y = signals(400, 3, seed=11)
     y[50:60, 2] = np.nan
     sigma = np.full(t.size, 0.05)
     cases: list[dict[str, float | np.ndarray]] = [
@@ -153,14 +135,14 @@ def test_fixed_p_and_wood_jennings_equal_the_twins(monkeypatch: pytest.MonkeyPat
         def make(kw: dict[str, float | np.ndarray] = kwargs) -> SmoothingSpline:
             return SmoothingSpline(t, y, **kw)  # type: ignore[arg-type]
 
-        twin, kernel = _twin_and_kernel(make, monkeypatch)
+        twin, kernel = twin_and_kernel(make, monkeypatch)
         a, b = kernel, twin
         assert isinstance(a, SmoothingSpline) and isinstance(b, SmoothingSpline)
         for name in ("p", "dof", "gcv", "msr", "variance"):
             assert _rel(getattr(a, name), getattr(b, name)) <= REL, (kwargs, name)
         assert _value_rel(a, b, t) <= REL
     # Wood & Jennings: the root of sum(w r^2) = N, found to the rounding of that sum
-    twin, kernel = _twin_and_kernel(lambda: SmoothingSpline(t, y, sigma=sigma), monkeypatch)
+    twin, kernel = twin_and_kernel(lambda: SmoothingSpline(t, y, sigma=sigma), monkeypatch)
     a, b = kernel, twin
     assert isinstance(a, SmoothingSpline) and isinstance(b, SmoothingSpline)
     assert _rel(a.p, b.p) <= 1e-8 and _rel(a.dof, b.dof) <= 1e-7
@@ -172,8 +154,8 @@ def test_long_record_search_equals_the_twins(monkeypatch: pytest.MonkeyPatch) ->
     monkeypatch.setattr(gcv, "LONG_RECORD", 1000)
     monkeypatch.setattr(gcv_batch, "LONG_RECORD", 1000)
     monkeypatch.setattr(gcv, "START_SEGMENT_LENGTH", 400)
-    t, y = _signals(3000, 2, seed=5)
-    twin, kernel = _twin_and_kernel(lambda: SmoothingSpline(t, y), monkeypatch)
+    t, y = signals(3000, 2, seed=5)
+    twin, kernel = twin_and_kernel(lambda: SmoothingSpline(t, y), monkeypatch)
     a, b = kernel, twin
     assert isinstance(a, SmoothingSpline) and isinstance(b, SmoothingSpline)
     assert _rel(a.gcv, b.gcv) <= REL
@@ -184,7 +166,7 @@ def test_long_record_search_equals_the_twins(monkeypatch: pytest.MonkeyPatch) ->
 def test_bad_arrays_raise_value_errors() -> None:
     kernel = native.load(KERNEL)
     assert kernel is not None
-    t, y = _signals(50, 1, seed=1)
+    t, y = signals(50, 1, seed=1)
     problem = PenalisedSpline(t, np.ones(t.size), 3)
     arrays = problem.kernel_arrays()
     fitted, rss = np.empty_like(y), np.empty(1)
@@ -206,7 +188,7 @@ def test_the_kernel_lets_other_threads_run() -> None:
     the whole call, the kernel would leave no tick inside; on a busy machine there are
     fewer, but not none.
     """
-    t, y = _signals(50_000, 1, seed=2)
+    t, y = signals(50_000, 1, seed=2)
     problem = PenalisedSpline(t, np.ones(t.size), 3)
     call: list[float] = []
 
@@ -232,9 +214,9 @@ def test_natural_spline_equals_scipys(
 ) -> None:
     from spotlab.kinematics._natural import natural_spline
 
-    t, y = _signals(n, k, seed=n + k)
+    t, y = signals(n, k, seed=n + k)
     points = np.sort(np.concatenate([t, np.random.default_rng(n).uniform(t[0], t[-1], 200)]))
-    twin, kernel = _twin_and_kernel(lambda: natural_spline(t, y, degree), monkeypatch)
+    twin, kernel = twin_and_kernel(lambda: natural_spline(t, y, degree), monkeypatch)
     for nu in range(4):
         ref = twin(points, nu=nu)
         assert np.max(np.abs(kernel(points, nu=nu) - ref)) <= 1e-12 * np.max(np.abs(ref)), nu
