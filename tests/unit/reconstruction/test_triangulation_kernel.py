@@ -8,10 +8,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _kernel_rigs import kernel_rigs
 
 from spotlab.core import native
 from spotlab.core.errors import ReconstructionError
-from spotlab.geometry import Camera, Rig
+from spotlab.geometry import Rig
 from spotlab.reconstruction import _frame_kernel, _solvers, triangulation
 from spotlab.reconstruction.triangulation import TriangulationResult, triangulate_points
 from spotlab.simulators.rigs import ring_rig
@@ -80,24 +81,9 @@ def _scene(rig: Rig, seed: int, n: int) -> np.ndarray:
     return uv
 
 
-def _rigs() -> dict[str, Rig]:
-    cams = list(ring_rig(8).cameras)
-    K = cams[0].K.copy()
-    K[0, 1] = 0.5
-    mixed = list(cams)
-    mixed[0] = Camera(K, cams[0].dist, cams[0].R, cams[0].t, cams[0].size, "skewed")
-    mixed[1] = Camera(cams[1].K, np.zeros(5), cams[1].R, cams[1].t, cams[1].size, "pinhole")
-    return {
-        "distorted": ring_rig(8),
-        "pinhole": ring_rig(8, distortion=False),
-        "skewed-and-pinhole": Rig(mixed),
-        "two cameras": ring_rig(2, seed=3),
-    }
-
-
-@pytest.mark.parametrize("name", list(_rigs()))
+@pytest.mark.parametrize("name", list(kernel_rigs()))
 def test_batch_points_equal_the_twins(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    rig = _rigs()[name]
+    rig = kernel_rigs()[name]
     uv = _scene(rig, 1, 150)  # the kernel's chunks of 64 points: two and a part
     rng = np.random.default_rng(9)
     weights = rng.uniform(0.2, 3.0, uv.shape[:2])
