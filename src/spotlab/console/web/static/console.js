@@ -214,7 +214,7 @@ function show3d(markers, cameras) {
   }
   const c = document.getElementById("view3d");
   // opaque (the backdrop fills it): the compositor copies it instead of blending it
-  const g = c.getContext("2d", { alpha: false });
+  const g = c.getContext("2d", { alpha: false, willReadFrequently: true });
   g.drawImage(drawBackdrop(c, cameras), 0, 0);
   if (!markers) return;
   if (markers.seq !== view.drawnSeq) { view.drawnSeq = markers.seq; received.frames3d += 1; }
