@@ -213,7 +213,8 @@ function show3d(markers, cameras) {
     if (reach > view.half) view.half = Math.ceil(reach / 500) * 500;
   }
   const c = document.getElementById("view3d");
-  // opaque (the backdrop fills it): the compositor copies it instead of blending it
+  // opaque (the backdrop fills it) and CPU-backed: neither changed Chromium's measured
+  // share here, but the console's latency was measured with them (docs/console.md)
   const g = c.getContext("2d", { alpha: false, willReadFrequently: true });
   g.drawImage(drawBackdrop(c, cameras), 0, 0);
   if (!markers) return;
