@@ -15,7 +15,7 @@ F = 30
 def _two_markers() -> np.ndarray:
     """(F, 2, 3) two markers 50 mm apart moving 5 mm a frame along x."""
     t = np.arange(F, dtype=float)[:, None] * [5.0, 0.0, 0.0]
-    return np.stack([t, t + [0.0, 50.0, 0.0]], axis=1)
+    return np.stack([t, t + np.array([0.0, 50.0, 0.0])], axis=1)
 
 
 def test_runs_end_at_gaps_and_jumps() -> None:
