@@ -73,10 +73,11 @@ def refuted_labels(
     """Labels of ``points`` in runs the other pass ``other`` refutes.
 
     A run is *confirmed* when the other pass puts the marker within ``agree_mm`` of it
-    on more frames than it puts it elsewhere. A run that is not confirmed and that the
-    other pass contradicts somewhere is *refuted* when a confirmed run of the other pass
-    is what contradicts it, or when it adjoins, without a gap, a confirmed run of its
-    own pass (the pass moved the label onto the point the other pass confirms).
+    on more frames than it puts it elsewhere. A run that is not confirmed is *refuted*
+    when a confirmed run of the other pass contradicts it (puts the marker elsewhere in
+    a frame, or gives its point to another marker), or when the other pass contradicts
+    it and it adjoins, without a gap, a confirmed run of its own pass (the pass moved the
+    label onto the point the other pass confirms).
     Two passes that agree on a wrong identity more than they disagree confirm it: this
     removes labels only where one pass's labels are borne out by the other.
 
@@ -102,9 +103,13 @@ def refuted_labels(
     confirmed_own = _confirmed(own, agree, differ, n_own)
     confirmed_theirs = _confirmed(theirs, agree, differ, n_theirs)
     contradicted = np.bincount(own[differ], minlength=n_own) > 0
-    # (a) contradicted by a confirmed run of the other pass
+    # (a) contradicted by a confirmed run of the other pass: the marker elsewhere, or
+    # its point given to another marker
+    in_confirmed = (theirs >= 0) & confirmed_theirs[np.maximum(theirs, 0)]
+    hit = (differ & in_confirmed) | (
+        (own >= 0) & ~agree & _named_otherwise(points, other, in_confirmed, agree_mm)
+    )
     by_confirmed = np.zeros(n_own, dtype=bool)
-    hit = differ & confirmed_theirs[np.maximum(theirs, 0)]
     by_confirmed[own[hit]] = True
     # (b) adjoining, without a gap, a confirmed run of its own pass
     adjoins = np.zeros(n_own, dtype=bool)
@@ -112,7 +117,7 @@ def refuted_labels(
     later, earlier = own[1:][cut], own[:-1][cut]
     adjoins[later[confirmed_own[earlier]]] = True
     adjoins[earlier[confirmed_own[later]]] = True
-    refuted = ~confirmed_own & contradicted & (by_confirmed | adjoins)
+    refuted = ~confirmed_own & (by_confirmed | (contradicted & adjoins))
     return (own >= 0) & refuted[np.maximum(own, 0)]
 
 
@@ -121,3 +126,20 @@ def _confirmed(runs: IntArray, agree: BoolArray, differ: BoolArray, n: int) -> B
     n_agree = np.bincount(runs[agree & (runs >= 0)], minlength=n)
     n_differ = np.bincount(runs[differ & (runs >= 0)], minlength=n)
     return np.asarray(n_agree > n_differ)
+
+
+def _named_otherwise(
+    points: FloatArray, other: FloatArray, trusted: BoolArray, agree_mm: float, chunk: int = 512
+) -> BoolArray:
+    """(F, M) labels of ``points`` within ``agree_mm`` of a ``trusted`` label the other
+    pass gives another marker in the same frame."""
+    F, M, _ = points.shape
+    out = np.zeros((F, M), dtype=bool)
+    others = ~np.eye(M, dtype=bool)
+    for a in range(0, F, chunk):
+        p, q = points[a : a + chunk], other[a : a + chunk]
+        with np.errstate(invalid="ignore"):
+            d = np.linalg.norm(p[:, :, None, :] - q[:, None, :, :], axis=-1)
+        close = (d <= agree_mm) & others & trusted[a : a + chunk, None, :]
+        out[a : a + chunk] = close.any(axis=2)
+    return out

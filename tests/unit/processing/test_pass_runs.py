@@ -51,3 +51,15 @@ def test_passes_on_two_identities_throughout_refute_nothing() -> None:
     forward[10:12] = np.nan
     assert not refuted_labels(forward, swapped, AGREE_MM, 20.0).any()
     assert not refuted_labels(swapped, forward, AGREE_MM, 20.0).any()
+
+
+def test_a_label_on_a_point_the_other_pass_names_otherwise_is_refuted() -> None:
+    truth = _two_markers()
+    forward = truth.copy()
+    forward[:, 0] = np.nan
+    forward[12, 0] = truth[12, 1]  # marker 0 once, on marker 1's point
+    forward[12, 1] = np.nan
+    backward = truth.copy()
+    backward[:, 0] = np.nan  # the backward pass silent on marker 0
+    refuted = refuted_labels(forward, backward, AGREE_MM, 20.0)
+    assert refuted[12, 0] and refuted.sum() == 1
