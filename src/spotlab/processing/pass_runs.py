@@ -106,8 +106,9 @@ def refuted_labels(
     # (a) contradicted by a confirmed run of the other pass: the marker elsewhere, or
     # its point given to another marker
     in_confirmed = (theirs >= 0) & confirmed_theirs[np.maximum(theirs, 0)]
+    doubtful = (own >= 0) & ~confirmed_own[np.maximum(own, 0)] & ~agree
     hit = (differ & in_confirmed) | (
-        (own >= 0) & ~agree & _named_otherwise(points, other, in_confirmed, agree_mm)
+        doubtful & _named_otherwise(points, other, in_confirmed, doubtful, agree_mm)
     )
     by_confirmed = np.zeros(n_own, dtype=bool)
     by_confirmed[own[hit]] = True
@@ -129,17 +130,24 @@ def _confirmed(runs: IntArray, agree: BoolArray, differ: BoolArray, n: int) -> B
 
 
 def _named_otherwise(
-    points: FloatArray, other: FloatArray, trusted: BoolArray, agree_mm: float, chunk: int = 512
+    points: FloatArray,
+    other: FloatArray,
+    trusted: BoolArray,
+    asked: BoolArray,
+    agree_mm: float,
+    chunk: int = 512,
 ) -> BoolArray:
-    """(F, M) labels of ``points`` within ``agree_mm`` of a ``trusted`` label the other
-    pass gives another marker in the same frame."""
+    """(F, M) labels of ``points`` (of those ``asked``) within ``agree_mm`` of a
+    ``trusted`` label the other pass gives another marker in the same frame."""
     F, M, _ = points.shape
     out = np.zeros((F, M), dtype=bool)
     others = ~np.eye(M, dtype=bool)
-    for a in range(0, F, chunk):
-        p, q = points[a : a + chunk], other[a : a + chunk]
+    frames = np.flatnonzero(asked.any(axis=1))
+    for a in range(0, frames.size, chunk):
+        f = frames[a : a + chunk]
+        p, q = points[f], other[f]
         with np.errstate(invalid="ignore"):
             d = np.linalg.norm(p[:, :, None, :] - q[:, None, :, :], axis=-1)
-        close = (d <= agree_mm) & others & trusted[a : a + chunk, None, :]
-        out[a : a + chunk] = close.any(axis=2)
+        close = (d <= agree_mm) & others & trusted[f, None, :]
+        out[f] = close.any(axis=2) & asked[f]
     return out
