@@ -56,6 +56,7 @@ import numpy as np
 from spotlab.core.errors import SpotlabError
 from spotlab.io import labelled_markers, read_trial
 from spotlab.processing.identification_passes import PassResult, identify_pass, join_passes
+from spotlab.processing.pass_runs import jump_mm
 from spotlab.reconstruction.identification import Identifier, MarkerModel
 from spotlab.reconstruction.identification.spreads import distance_range
 from spotlab.testing.trial_scene import trial_scene
@@ -136,7 +137,7 @@ def run(path: Path, args: argparse.Namespace) -> dict:
         scene.rig, model, frames, np.ones(F - h, bool), numbers, range(F - h - 1, -1, -1)
     )
     forward = PassResult(points, np.full((F - h, M), np.nan))
-    joined, counts = join_passes(forward, backward)
+    joined, counts = join_passes(forward, backward, jump_mm(model))
     # the truth, only now
     truth = scene.markers_mm[h:]
     held = np.isfinite(truth[..., 0])

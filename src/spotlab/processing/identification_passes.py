@@ -9,8 +9,10 @@ the forward pass left empty with the backward pass's label. Where both passes la
 marker they must agree (within :data:`AGREE_MM`); where they do not, now and then, that
 frame's label is dropped: a gap, never a guess; a filled label that lands on a point
 another marker holds is dropped too. A marker on which the passes disagree throughout
-(:data:`SYSTEMATIC_SHARE`) keeps the forward labels alone. Measured on the simulated
-walk of a subject the model never saw (docs/identification.md): a walk's first half
+(:data:`SYSTEMATIC_SHARE`) keeps the forward labels alone. Before that, each pass loses
+the runs of labels the other refutes (:func:`~spotlab.processing.pass_runs.refuted_labels`:
+a run the other pass contradicts, where a run it confirms bears it out). Measured on the
+simulated walk of a subject the model never saw (docs/identification.md): a walk's first half
 second, when a foot or a wrist is still unlabelled, is what the backward pass fills.
 """
 
@@ -26,6 +28,7 @@ from numpy.typing import NDArray
 from spotlab.core.errors import CalibrationError
 from spotlab.geometry import Rig
 from spotlab.processing.errors import InputError
+from spotlab.processing.pass_runs import JUMP_MM, jump_mm, refuted_labels
 from spotlab.processing.progress import ProgressSink
 from spotlab.reconstruction.identification import (
     FLOODED,
@@ -138,8 +141,14 @@ def identify_pass(
     return out
 
 
-def join_passes(forward: PassResult, backward: PassResult) -> tuple[PassResult, dict[str, int]]:
+def join_passes(
+    forward: PassResult, backward: PassResult, jump: float = JUMP_MM
+) -> tuple[PassResult, dict[str, int]]:
     """The forward pass, its empty marker-frames filled from the backward pass.
+
+    First each pass loses the labels the other refutes
+    (:func:`~spotlab.processing.pass_runs.refuted_labels`, runs cut at ``jump`` mm: see
+    :func:`~spotlab.processing.pass_runs.jump_mm`); the rest is joined frame by frame.
 
     Returns
     -------
@@ -152,7 +161,10 @@ def join_passes(forward: PassResult, backward: PassResult) -> tuple[PassResult, 
         label of the frame) and ``systematic_markers`` (markers whose passes disagreed on
         more than :data:`SYSTEMATIC_SHARE` of their frames: forward labels kept).
     """
-    fwd, bwd = forward.points, backward.points
+    refuted_f = refuted_labels(forward.points, backward.points, AGREE_MM, jump)
+    refuted_b = refuted_labels(backward.points, forward.points, AGREE_MM, jump)
+    fwd = np.where(refuted_f[..., None], np.nan, forward.points)
+    bwd = np.where(refuted_b[..., None], np.nan, backward.points)
     has_f = np.isfinite(fwd[..., 0])
     has_b = np.isfinite(bwd[..., 0])
     both = has_f & has_b
@@ -164,7 +176,7 @@ def join_passes(forward: PassResult, backward: PassResult) -> tuple[PassResult, 
     residual = np.where(fill, backward.residual_px, forward.residual_px)
     drop = disagree | (_doubled(points) & fill)
     points[drop] = np.nan
-    residual[drop] = np.nan
+    residual[~np.isfinite(points[..., 0])] = np.nan
     joined = PassResult(
         points,
         residual,
@@ -210,9 +222,9 @@ def identify_both_ways(
     -------
     joined : PassResult
     counts : dict
-        ``filled_backward`` and ``label_conflicts``.
+        As :func:`join_passes` gives them.
     """
     F = len(frames)
     forward = identify_pass(rig, model, frames, usable, frame_no, range(F), progress)
     backward = identify_pass(rig, model, frames, usable, frame_no, range(F - 1, -1, -1))
-    return join_passes(forward, backward)
+    return join_passes(forward, backward, jump_mm(model))
