@@ -21,10 +21,12 @@ def _kernel_names() -> list[str]:
     ]
 
 
-@pytest.mark.parametrize("module", _kernel_names() or ["(none yet)"])
+def test_the_kernels_are_found() -> None:
+    assert len(_kernel_names()) >= 4, _kernel_names()  # gcv, bands, bspline, frame
+
+
+@pytest.mark.parametrize("module", _kernel_names())
 def test_every_kernel_is_built_where_a_compiler_exists(module: str) -> None:
-    if module == "(none yet)":
-        return
     assert shutil.which("cc") or shutil.which("gcc"), "no C compiler on this machine"
     importlib.import_module(module)
 
