@@ -9,38 +9,26 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _centroid_lab import LAB_GROUP
 
-import spotlab.simulators  # noqa: F401  (registers sim://)
-from spotlab.acquisition.recorder import Recorder
-from spotlab.acquisition.session import Session
 from spotlab.console.cli import main
 from spotlab.console.errors import CommandError
-from spotlab.drivers.centroid import CentroidDriver
 from spotlab.geometry import Camera, Rig
 from spotlab.processing.blob_calibration_inputs import load_blob_recordings
 from spotlab.processing.calibration_inputs import WandObservations
 from spotlab.processing.recording_calibration import check_scale as _check_scale
-from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
 from spotlab.simulators.motions import reference_markers
 
-RATE_HZ = 100
+# one worker makes the session recordings shared with the other hub tests (conftest.py)
+pytestmark = pytest.mark.xdist_group(LAB_GROUP)
 
 
 @pytest.fixture(scope="module")
-def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def folder(calibration_recordings: Path) -> Path:
     """``wand.spj`` (1.5 s of a 3-marker wand), ``frame.spj`` (0.5 s of the L-frame),
-    ``lframe.csv`` (its published points), ``rig.toml`` (the true rig, for scoring)."""
-    path = tmp_path_factory.mktemp("blob-calibration")
-    for name, seconds, motion, markers in (("wand", 1.5, "wand", 3), ("frame", 0.5, "lframe", 4)):
-        options = CentroidSimOptions(
-            cameras=8, rate_hz=RATE_HZ, seed=4, motion=motion, markers=markers,
-            rig_out=path / "rig.toml", frame_points_out=path / "lframe.csv",
-        )  # fmt: skip
-        driver = CentroidDriver(centroid_url_for(options), cameras=8, rate_hz=RATE_HZ)
-        with Session([driver], [Recorder(path / f"{name}.spj", {"command": "record"})]) as s:
-            s.run_for(seconds)
-        driver.close()
-    return path
+    ``lframe.csv`` (its published points), ``rig.toml`` (the true rig, for scoring):
+    conftest.py's :func:`calibration_recordings`."""
+    return calibration_recordings
 
 
 def _calibrate(folder: Path, *extra: str, capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:

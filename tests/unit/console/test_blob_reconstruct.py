@@ -1,18 +1,23 @@
 """``spotlab reconstruct`` / ``spotlab export`` of a video-centroid recording: blobs of an
 in-process simulated hub (sim://centroid) identified and named by the marker model that
 ``spotlab record --model`` stores, compared with the simulator's truth; every bad input
-as one clear line."""
+as one clear line. The rig and the model are the lab's own (conftest.py): the rig
+calibrated from wand and L-frame recordings, the subject's model learnt from its static
+and range-of-motion recordings; the trials labelled are the same subject walking, and
+only the final scoring reads the simulator's truth."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from _centroid_lab import LAB_GROUP, SUBJECT, SubjectLab
 
 import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
@@ -31,27 +36,30 @@ from spotlab.processing.blob_trajectories import (
 )
 from spotlab.reconstruction.identification import MarkerModel
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
-from spotlab.testing.centroid_model import body_marker_model, write_body_model
 from spotlab.testing.centroid_scene import centroid_scene
+
+# one worker makes the session recordings shared with the other hub tests (conftest.py)
+pytestmark = pytest.mark.xdist_group(LAB_GROUP)
 
 RATE_HZ, SECONDS = 300, 0.7
 
 
 @pytest.fixture(scope="module")
-def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """``walk.spj`` (0.7 s of 8 cameras x 40 markers at 300 Hz, with the marker model in
-    its session metadata), ``bare.spj`` (0.3 s, no model), ``rig.toml``, ``truth.npz``,
-    ``model.json``."""
+def folder(tmp_path_factory: pytest.TempPathFactory, subject_lab: SubjectLab) -> Path:
+    """``walk.spj`` (0.7 s of 8 cameras x 40 markers of the subject walking at 300 Hz,
+    with the lab's marker model in its session metadata), ``bare.spj`` (0.3 s, no model),
+    their truths ``walk.npz`` and ``bare.npz`` (scoring only), and the lab's ``rig.toml``
+    and ``model.json``."""
     path = tmp_path_factory.mktemp("blobs")
-    write_body_model(path / "model.json", 40, 1)
+    shutil.copyfile(subject_lab.rig, path / "rig.toml")
+    shutil.copyfile(subject_lab.model, path / "model.json")
     model = MarkerModel.load(path / "model.json").to_json()
     for name, seconds, meta in (
         ("walk", SECONDS, {"command": "record", MODEL_KEY: model}),
         ("bare", 0.3, {"command": "record"}),
     ):
         options = CentroidSimOptions(
-            cameras=8, rate_hz=RATE_HZ, seed=1, truth=path / f"{name}.npz",
-            rig_out=path / "rig.toml",
+            cameras=8, rate_hz=RATE_HZ, seed=SUBJECT, truth=path / f"{name}.npz"
         )  # fmt: skip
         driver = CentroidDriver(centroid_url_for(options), cameras=8, rate_hz=RATE_HZ)
         with Session([driver], [Recorder(path / f"{name}.spj", meta)], close_devices=True) as s:
@@ -213,7 +221,7 @@ def test_labels_option_is_refused_for_blobs(
 
 def test_a_restarted_stream_goes_on_after_a_gap_on_the_hubs_clock(folder: Path) -> None:
     # The hub's frames decoded in process (no pacing: every frame, the same each run).
-    scene = centroid_scene(0.5, RATE_HZ, seed=1, cameras=8)
+    scene = centroid_scene(0.5, RATE_HZ, seed=SUBJECT, cameras=8)
     model = MarkerModel.load(folder / "model.json")
     b, k, path = scene.blobs, 50, folder / "scene.spj"
     rec = BlobRecording(b, _frame_numbers(b, RATE_HZ, path), RATE_HZ, "centroid", None)
@@ -227,11 +235,14 @@ def test_a_restarted_stream_goes_on_after_a_gap_on_the_hubs_clock(folder: Path) 
     blobs = dataclasses.replace(b, camera_frame=frames, ticks=b.ticks + shift)
     number = _frame_numbers(blobs, RATE_HZ, path)
     np.testing.assert_array_equal(number[k:] - number[k - 1], np.arange(b.n_frames - k) + 41)
-    done = identify_recording(scene.rig, BlobRecording(blobs, number, RATE_HZ, "c", None), model)
+    rig = Rig.load(folder / "rig.toml")  # the lab's: scene.rig is the simulator's truth
+    done = identify_recording(rig, BlobRecording(blobs, number, RATE_HZ, "c", None), model)
     assert done.summary["lost_frames"] == 40 and done.trial.n_frames == b.n_frames + 40
     assert done.summary["identification_restarts"] == 1
     assert np.isnan(done.trial.points[k : k + 40]).all()
-    # Labels are earned again after the gap, at the true positions.
+    # Labels are earned again after the gap, at the true positions. Measured with the lab's
+    # model: 92.5 % (LANK, LHEE, LTOE not earned again in the 100 frames; the simulator's
+    # truth-learnt model earned every one).
     after = done.trial.points[-20:]
     err = np.linalg.norm(after - scene.markers_mm[-20:], axis=-1)
     assert np.isfinite(err).mean() > 0.9 and np.nanmax(err) < 5.0
@@ -241,12 +252,19 @@ def test_a_restarted_stream_goes_on_after_a_gap_on_the_hubs_clock(folder: Path) 
         _frame_numbers(back, RATE_HZ, path)
 
 
-def test_the_simulator_model_names_the_truth_labels(folder: Path) -> None:
+def test_the_labs_model_names_the_truth_labels_and_the_subjects_clusters(folder: Path) -> None:
     model = MarkerModel.load(folder / "model.json")
-    truth = np.load(folder / "walk.npz")
-    assert list(model.labels) == [str(x) for x in truth["labels"]]
+    truth = np.load(folder / "walk.npz")  # scoring: the model never saw this walk
+    labels = [str(x) for x in truth["labels"]]
+    assert list(model.labels) == labels
     assert len(model.segments) >= 1
-    assert model.to_json() == body_marker_model(40, 1).to_json()
+    true = np.asarray(truth["markers_mm"])
+    for seg in model.segments:
+        X = true[:, [labels.index(model.labels[m]) for m in seg.markers]]
+        d_true = np.nanmedian(np.linalg.norm(X[:, :, None] - X[:, None], axis=-1), axis=0)
+        d_model = np.linalg.norm(seg.coordinates[:, None] - seg.coordinates[None], axis=-1)
+        # measured: 2.2 mm at most (one segment, the trunk's 16 markers)
+        assert np.abs(d_true - d_model).max() < 5.0, (seg.name, np.abs(d_true - d_model).max())
 
 
 def test_a_camera_dropping_out_and_a_sunlit_camera_are_flagged_not_mislabelled(

@@ -1,9 +1,10 @@
 """The console's "Process" of a video-centroid trial: the blobs identified with the lab's
 marker model (issue 15's processing on the path that needs a model), and the trial's
-sidecar told what was done; without a model, a failed job that says why. The model is
-the testing helper's model of the simulated body (as in test_blob_reconstruct.py): this
-checks the console's processing path; labelling out of sample is judged in
-docs/identification.md."""
+sidecar told what was done; without a model, a failed job that says why. The rig and
+the model are the lab's own (conftest.py): the rig calibrated from wand and L-frame
+recordings, the subject's model learnt from its static and range-of-motion recordings;
+the trial processed is the same subject walking, and only the final scoring reads the
+simulator's truth."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _centroid_lab import LAB_GROUP, SUBJECT, SubjectLab
 
 import spotlab.simulators  # noqa: F401  (registers sim://)
 from spotlab.acquisition.recorder import Recorder
@@ -20,21 +22,21 @@ from spotlab.console.web.processing_jobs import Processor
 from spotlab.console.web.trials import TrialInfo, TrialStore
 from spotlab.drivers.centroid import CentroidDriver
 from spotlab.simulators.centroid_service import CentroidSimOptions, centroid_url_for
-from spotlab.testing.centroid_model import write_body_model
+
+# one worker makes the session recordings shared with the other hub tests (conftest.py)
+pytestmark = pytest.mark.xdist_group(LAB_GROUP)
 
 RATE_HZ, FRAMES = 300, 150
 
 
 @pytest.fixture(scope="module")
-def lab(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """A data folder with one recorded hub trial (8 cameras x 40 markers, half a second at
-    300 Hz, no model in its metadata), the hub's rig and a marker model file."""
+def lab(tmp_path_factory: pytest.TempPathFactory, subject_lab: SubjectLab) -> dict[str, Any]:
+    """A data folder with one recorded hub trial (8 cameras x 40 markers of the subject
+    walking, half a second at 300 Hz, no model in its metadata), and the lab's rig and
+    marker model files."""
     root = tmp_path_factory.mktemp("console-blobs")
     store = TrialStore(root / "data")
-    write_body_model(root / "model.json", 40, 1)
-    options = CentroidSimOptions(
-        cameras=8, rate_hz=RATE_HZ, seed=1, truth=root / "truth.npz", rig_out=root / "rig.toml"
-    )
+    options = CentroidSimOptions(cameras=8, rate_hz=RATE_HZ, seed=SUBJECT, truth=root / "truth.npz")
     journal = store.journal("S01", "walk", "t1")
     journal.parent.mkdir(parents=True)
     driver = CentroidDriver(centroid_url_for(options), cameras=8, rate_hz=RATE_HZ)
@@ -44,7 +46,7 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         while sum(session.status().frames.values()) < FRAMES and time.monotonic() < deadline:
             time.sleep(0.02)
     store.save(TrialInfo("S01", "walk", "t1", state="done"))
-    return {"root": root, "store": store}
+    return {"root": root, "store": store, "rig": subject_lab.rig, "model": subject_lab.model}
 
 
 def _finished(proc: Processor, tid: str) -> dict[str, Any]:
@@ -58,7 +60,7 @@ def _finished(proc: Processor, tid: str) -> dict[str, Any]:
 
 def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> None:
     root, store = lab["root"], lab["store"]
-    proc = Processor(store, root / "rig.toml", root / "model.json", root / "lab.toml")
+    proc = Processor(store, lab["rig"], lab["model"], root / "lab.toml")
     try:
         info = store.load("S01.walk.t1")
         proc.submit(info)
@@ -79,8 +81,9 @@ def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> N
     seen = np.isfinite(trial.points).all(axis=2)
     assert seen.mean() > 0.97, seen.mean()  # measured 1.0
     error = np.linalg.norm(trial.points[seen] - true[seen], axis=1)
-    # measured: RMS 0.21 mm (the centroid noise), largest 0.93 mm
-    assert np.sqrt(np.mean(error**2)) < 0.4 and error.max() < 2.0, (error.mean(), error.max())
+    # measured with the calibrated rig: RMS 0.77-0.89 mm, largest 2.5-2.7 mm (with the
+    # simulator's true rig: RMS 0.21 mm, the centroid noise, largest 0.93 mm)
+    assert np.sqrt(np.mean(error**2)) < 1.2 and error.max() < 4.0, (error.mean(), error.max())
     saved = store.load(info.id).processing
     assert saved is not None and saved["path"] == "identification"
     assert saved["quality"]["frames"] == trial.points.shape[0] >= FRAMES // 2
@@ -88,7 +91,7 @@ def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> N
 
 def test_without_a_model_the_job_fails_and_says_why(lab: dict[str, Any]) -> None:
     root, store = lab["root"], lab["store"]
-    proc = Processor(store, root / "rig.toml", None, root / "lab.toml")
+    proc = Processor(store, lab["rig"], None, root / "lab.toml")
     try:
         info = store.load("S01.walk.t1")
         proc.submit(info)
