@@ -14,6 +14,7 @@ from spotlab.console.commands.sim_qualisys import add_qualisys_arguments, run_qu
 from spotlab.console.errors import CommandError
 from spotlab.io import FileFormatError
 from spotlab.processing.paths import check_output_dir, check_output_paths
+from spotlab.reconstruction.identification import MarkerModel
 from spotlab.simulators import service
 from spotlab.simulators.centroid_service import (
     CENTROID_MOTIONS,
@@ -21,11 +22,11 @@ from spotlab.simulators.centroid_service import (
     CentroidSimOptions,
     serve_centroid_pty,
 )
+from spotlab.simulators.centroid_truth_model import model_walk
 from spotlab.simulators.coda_service import CodaSimOptions, serve_coda_pty, serve_coda_tcp
 from spotlab.simulators.faults import parse_schedule
 from spotlab.simulators.lab import lab_dir
 from spotlab.simulators.motions import MOTIONS, from_c3d, make_motion, static_points
-from spotlab.testing.centroid_model import write_body_model
 
 if TYPE_CHECKING:
     from spotlab.simulators.transports.pty import PtyServer
@@ -442,7 +443,8 @@ def run(args: argparse.Namespace) -> int:
                 "--model-out: the marker model is the walking body's (--motion walk)"
             )
         if args.model_out is not None:
-            write_body_model(args.model_out, options.markers, options.seed)
+            # the simulator's own output: its body's model, learnt from its true walk
+            MarkerModel.infer(*model_walk(options.markers, options.seed)).save(args.model_out)
         return _serve(args, serve_centroid_pty(options))
     if args.family == "coda":
         options = coda_options_from_args(args)
