@@ -67,7 +67,7 @@ class SubjectLab:
     Attributes
     ----------
     rig : Path
-        The rig ``spotlab calibrate`` made of :func:`calibration_recordings` (TOML).
+        The rig ``spotlab calibrate`` made of conftest.py's ``calibration_recordings`` (TOML).
     model : Path
         Subject :data:`SUBJECT`'s final marker model (``MarkerModel.save`` JSON).
     """

@@ -6,6 +6,7 @@ test`` (``--dist loadgroup``) makes them once, on one worker. The true rig
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -39,17 +40,26 @@ def calibration_recordings(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+def _record_subject(path: Path) -> None:
+    """``static.spj`` and ``rom.spj`` of subject :data:`SUBJECT` into ``path``."""
+    for name, motion, seconds in (("static", "static", STATIC_S), ("rom", "rom", ROM_S)):
+        options = CentroidSimOptions(rate_hz=MODEL_RATE_HZ, seed=SUBJECT, motion=motion)
+        record(path / f"{name}.spj", seconds, options)
+
+
 @pytest.fixture(scope="session")
 def subject_lab(
     tmp_path_factory: pytest.TempPathFactory, calibration_recordings: Path
 ) -> SubjectLab:
-    """The calibrated rig and subject :data:`SUBJECT`'s model learnt with it."""
+    """The calibrated rig and subject :data:`SUBJECT`'s model learnt with it (the
+    subject's recordings made while the rig is calibrated: they wait on the hub's
+    clock, the calibration on the CPU)."""
     path = tmp_path_factory.mktemp("subject-lab")
     rig = path / "rig.toml"
-    calibrated_rig(calibration_recordings).save(rig)
-    for name, motion, seconds in (("static", "static", STATIC_S), ("rom", "rom", ROM_S)):
-        options = CentroidSimOptions(rate_hz=MODEL_RATE_HZ, seed=SUBJECT, motion=motion)
-        record(path / f"{name}.spj", seconds, options)
+    with ThreadPoolExecutor(1) as pool:
+        recorded = pool.submit(_record_subject, path)
+        calibrated_rig(calibration_recordings).save(rig)
+        recorded.result()
     model = path / "model.json"
     lab_model(path / "static.spj", path / "rom.spj", Rig.load(rig)).save(model)
     return SubjectLab(rig, model)
