@@ -81,9 +81,9 @@ def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> N
     seen = np.isfinite(trial.points).all(axis=2)
     assert seen.mean() > 0.97, seen.mean()  # measured 1.0
     error = np.linalg.norm(trial.points[seen] - true[seen], axis=1)
-    # measured with the calibrated rig: RMS 0.77-0.89 mm, largest 2.5-2.7 mm (with the
-    # simulator's true rig: RMS 0.21 mm, the centroid noise, largest 0.93 mm)
-    assert np.sqrt(np.mean(error**2)) < 1.2 and error.max() < 4.0, (error.mean(), error.max())
+    # measured with the calibrated rig (6 runs): RMS 0.73-0.95 mm, largest 1.4-1.8 mm
+    # (with the simulator's true rig and model: RMS 0.21 mm, the centroid noise, 0.93 mm)
+    assert np.sqrt(np.mean(error**2)) < 1.2 and error.max() < 3.0, (error.mean(), error.max())
     saved = store.load(info.id).processing
     assert saved is not None and saved["path"] == "identification"
     assert saved["quality"]["frames"] == trial.points.shape[0] >= FRAMES // 2
