@@ -4,9 +4,11 @@ Prints one JSON object per trial file, then a summary. For every C3D and TRC fil
 ``--data`` (default ``../shared/data``) that suits (see below):
 
 1. the labelled markers (:func:`spotlab.io.labelled_markers`: named, seen in half the
-   frames, not a model output), less the points rigid to 0.5 mm with two others
-   (segment axes and joint centres a program computed), over the frames where at least
-   80 % of them are seen;
+   frames, not a model output), less the points a program computed from others
+   (:func:`computed_points`, from the file's own trajectories: a copy of a point listed
+   before plus an offset, an affine combination of two, points rigid to 0.5 mm with two
+   others or to 0.1 mm with one; printed as a ``"left_out"`` line), over the frames
+   where at least 80 % of them are seen;
 2. a marker model learnt with :meth:`MarkerModel.infer` **with its defaults** from the
    first half of those frames (``--learn 0.5``);
 3. the whole trial placed in the volume of the 8-camera reference ring rig and rendered
@@ -33,7 +35,8 @@ Figures per trial (marker-frames of the labelled half):
   machine).
 
 A file is skipped (a line with ``"skipped"`` and the reason) when it cannot be read,
-holds fewer than 6 labelled markers or 100 frames with most of them seen, when
+names an inertial suit's maker in its MANUFACTURER group (Xsens: a body model's points,
+no optical markers), holds fewer than 6 labelled markers or 100 frames with most of them seen, when
 :meth:`MarkerModel.infer` refuses it (a trial that hardly moves), or when its markers
 sit on no segment (chosen rigid tolerance above 40 mm: data that are not skin markers
 on a body). Files holding the same data as one already run (the c3d.org format
@@ -49,12 +52,15 @@ import argparse
 import json
 import time
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from spotlab.core.errors import SpotlabError
 from spotlab.io import labelled_markers, read_trial
+from spotlab.io.c3d_parameters import C3DParameters
+from spotlab.io.trial import Trial
 from spotlab.processing.identification_passes import PassResult, identify_pass, join_passes
 from spotlab.processing.pass_runs import jump_mm
 from spotlab.reconstruction.identification import Identifier, MarkerModel
@@ -62,39 +68,163 @@ from spotlab.reconstruction.identification.spreads import distance_range
 from spotlab.testing.trial_scene import trial_scene
 
 MIN_MARKERS, MIN_FRAMES, MAX_TOLERANCE_MM, COMPUTED_MM = 6, 100, 40.0, 0.5
+#: A relation with one or two others holds to this (mm) if computed: the file's precision.
+EXACT_MM = 0.1
+#: Only points that move this much (RMS about their mean position, mm) are judged.
+MOVING_MM = 10.0
 
 
-def trial_data(path: Path) -> tuple[tuple[str, ...], np.ndarray, float]:
+def trial_data(path: Path) -> tuple[tuple[str, ...], np.ndarray, float, dict[str, str]]:
     """Labels, trajectories (F, M, 3) over the frames where 80 % of the markers are
-    seen (first to last such frame), and the frame rate; ValueError if unsuitable."""
+    seen (first to last such frame), the frame rate, and the points left out as computed
+    (label: why); ValueError if unsuitable."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         trial = read_trial(path)
+    maker = inertial_maker(trial)
+    if maker is not None:
+        raise ValueError(f"no optical markers: an inertial suit's body model ({maker})")
     labels, X = labelled_markers(trial, path)
-    measured = ~computed_points(X)
+    computed = computed_points(X, labels)
+    left_out = {labels[m]: why for m, why in computed.items()}
+    measured = np.array([m not in computed for m in range(len(labels))], dtype=bool)
     labels = tuple(name for name, keep in zip(labels, measured, strict=True) if keep)
     X = X[:, measured]
     if len(labels) < MIN_MARKERS:
-        raise ValueError(f"{len(labels)} labelled markers")
+        raise ValueError(f"{len(labels)} labelled markers ({len(left_out)} computed ones left out)")
     seen = np.isfinite(X).all(axis=2).mean(axis=1) >= 0.8
     if seen.sum() < MIN_FRAMES:
         raise ValueError(f"{int(seen.sum())} frames with most markers seen")
     first, last = np.flatnonzero(seen)[[0, -1]]
-    return labels, X[first : last + 1], trial.point_rate
+    return labels, X[first : last + 1], trial.point_rate, left_out
 
 
 #: Identifier options (defaults; tuning experiments change this).
 IDENTIFIER: dict = {}
 
 
-def computed_points(X: np.ndarray) -> np.ndarray:
-    """(M,) True for points rigid to numerical precision with two others (distance
-    spread < 0.5 mm): segment axes or joint centres a program computed (Plug-in Gait
-    ``PELO``/``PELA``..., A.R.T. 6-DOF limbs, Xsens), not markers a camera sees."""
+#: Makers of inertial suits: their C3D files hold a body model's points, not markers.
+INERTIAL_MAKERS = ("xsens",)
+
+
+def inertial_maker(trial: Trial) -> str | None:
+    """The maker and program a C3D file names in its MANUFACTURER group (COMPANY,
+    SOFTWARE) when the maker is one of :data:`INERTIAL_MAKERS`, else None."""
+    params = trial.metadata.get("c3d_parameters")
+    if not isinstance(params, C3DParameters):
+        return None
+    names = []
+    for key in ("MANUFACTURER:COMPANY", "MANUFACTURER:SOFTWARE"):
+        param = params.get(key)
+        if param is not None and param.kind == -1:
+            names += [s for s in param.strings() if s]
+    said = " / ".join(names)
+    return said if any(maker in said.lower() for maker in INERTIAL_MAKERS) else None
+
+
+def computed_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
+    """Points a program computed from others, found in the trajectories alone.
+
+    Only points that move (``MOVING_MM``, 10 mm RMS about their mean position, or more)
+    are judged: in a still trial every pair looks rigid. Skin markers slide on the skin
+    by millimetres and carry their own measurement noise; a computed point holds its
+    relation to the file's numerical precision:
+
+    1. in the file's order, a point whose trajectory is that of a point listed before it
+       plus a constant offset, or an affine combination ``a x_j + (1 - a) x_k + c`` of
+       two listed before it (midpoints, a "virtual hand" on the elbow-wrist line), to
+       ``EXACT_MM`` (0.1 mm) RMS over the frames all of them are seen. Programs list
+       what they compute after the markers they compute it from, so the real marker of
+       such a set, listed first, is kept. Markers on a rigid object that happen to lie
+       on a line meet the relation only to their noise (0.48 mm in ``Vicon.c3d``'s box);
+    2. of the rest, points rigid (distance range below ``COMPUTED_MM``, 0.5 mm) with two
+       others or more: segment axes and joint centres (Plug-in Gait ``PELO``,
+       ``PELA``..., A.R.T. 6-DOF limbs);
+    3. of the rest, in the file's order, a point rigid to ``EXACT_MM`` with one listed
+       before it (a point at a fixed offset in a segment's frame: Motion Analysis
+       ``VLTO#2``, 20.0 mm from ``L.TO``).
+
+    Parameters
+    ----------
+    X : ndarray, shape (F, M, 3)
+        Trajectories (mm), NaN where missing, in the file's order.
+    labels : sequence of str, length M
+
+    Returns
+    -------
+    dict of int to str
+        Index of each point left out, and why.
+    """
+    seen = np.isfinite(X).all(axis=2)
+    Xz = np.where(seen[..., None], X, 0.0)
+    n_seen = np.maximum(seen.sum(axis=0), 1)
+    mean = Xz.sum(axis=0) / n_seen[:, None]
+    moving = np.sqrt((((Xz - mean) ** 2).sum(axis=2) * seen).sum(axis=0) / n_seen) >= MOVING_MM
+    out: dict[int, str] = {}
+    kept: list[int] = []
+    for i in np.flatnonzero(moving):
+        why = _derived(Xz, seen, i, kept, labels)
+        if why:
+            out[int(i)] = why
+        else:
+            kept.append(int(i))
     lo, hi = distance_range(X)
     spread = np.nan_to_num(hi - lo, nan=np.inf)
     np.fill_diagonal(spread, np.inf)
-    return np.asarray((spread < COMPUTED_MM).sum(axis=1) >= 2)
+    rest = np.array(kept, dtype=int)
+    rigid = spread[np.ix_(rest, rest)] < COMPUTED_MM
+    for i, row in zip(rest, rigid, strict=True):
+        if row.sum() >= 2:
+            names = ", ".join(labels[j] for j in rest[row])
+            out[int(i)] = f"rigid to {COMPUTED_MM} mm with {names}"
+    rest = [i for i in rest if i not in out]
+    for n, i in enumerate(rest):
+        first = next((j for j in rest[:n] if j not in out and spread[i, j] < EXACT_MM), None)
+        if first is not None:
+            out[int(i)] = f"rigid with {labels[first]} ({spread[i, first]:.2f} mm)"
+    return dict(sorted(out.items()))
+
+
+def _derived(
+    Xz: np.ndarray, seen: np.ndarray, i: int, before: list[int], labels: Sequence[str]
+) -> str | None:
+    """Why point ``i`` is a copy plus an offset, or an affine combination of two, of the
+    points ``before`` it, or None.
+
+    ``Xz`` (F, M, 3) holds the positions (mm), 0 where not ``seen`` (F, M). A relation
+    counts over the frames all its points are seen, at least half of those ``i`` is
+    seen in; an affine one only where ``i`` moves 1 mm RMS or more about the other
+    point (ten times ``EXACT_MM``; less is a copy's test).
+    """
+    need = max(10, int(seen[:, i].sum()) // 2)
+    for k in before:  # x_i = x_k + c
+        frames = seen[:, i] & seen[:, k]
+        if frames.sum() >= need:
+            d = Xz[frames, i] - Xz[frames, k]
+            rms = float(np.sqrt(((d - d.mean(axis=0)) ** 2).sum(axis=1).mean()))
+            if rms < EXACT_MM:
+                return f"{labels[k]} plus a constant offset ({rms:.2f} mm RMS)"
+    ref = np.array(before, dtype=int)
+    for k in before:  # x_i - x_k = a (x_j - x_k) + c, for every j before i at once
+        W = ((seen[:, i] & seen[:, k])[:, None] & seen[:, ref]).astype(float)  # (F, J)
+        n = W.sum(axis=0)
+        nn = np.maximum(n, 1.0)
+        y = Xz[:, i] - Xz[:, k]  # (F, 3)
+        z = Xz[:, ref] - Xz[:, k, None]  # (F, J, 3)
+        sy, sz = W.T @ y, np.einsum("fj,fjd->jd", W, z)
+        cyy = W.T @ (y * y).sum(axis=1) - (sy * sy).sum(axis=1) / nn
+        czz = np.einsum("fj,fj->j", W, (z * z).sum(axis=2)) - (sz * sz).sum(axis=1) / nn
+        cyz = np.einsum("fj,fj->j", W, np.einsum("fd,fjd->fj", y, z)) - (sy * sz).sum(1) / nn
+        a = cyz / np.maximum(czz, 1e-9)
+        rms = np.sqrt(np.maximum(cyy - a * cyz, 0.0) / nn)
+        hit = (n >= need) & (ref != k) & (rms < EXACT_MM) & (cyy >= (10 * EXACT_MM) ** 2 * nn)
+        if hit.any():
+            h = int(np.argmax(hit))
+            return (
+                f"{a[h]:.2f} {labels[ref[h]]} + {1 - a[h]:.2f} {labels[k]} plus a constant "
+                f"({rms[h]:.2f} mm RMS)"
+            )
+    return None
 
 
 def _scores(
@@ -112,9 +242,12 @@ def _scores(
     }
 
 
-def run(path: Path, args: argparse.Namespace) -> dict:
-    """Learn on the first part, identify the rest, score."""
-    labels, X, rate = trial_data(path)
+def run(
+    path: Path, data: tuple[tuple[str, ...], np.ndarray, float], args: argparse.Namespace
+) -> dict:
+    """Learn on the first part of a trial's ``data`` (:func:`trial_data`), identify the
+    rest, score."""
+    labels, X, rate = data
     F, M = X.shape[:2]
     h = round(args.learn * F)
     model = MarkerModel.infer(labels, X[:h])
@@ -199,13 +332,15 @@ def main() -> None:
     results = []
     for path in files:
         try:
-            _, X, _ = trial_data(path)
+            labels, X, rate, left_out = trial_data(path)
             # the c3d.org format variants differ by a scale step (< 0.3 mm)
             key = f"{X.shape} {np.round(np.nanmean(X, axis=(0, 1)), 0)}"
             if key in done:
                 raise ValueError(f"same data as {done[key]}")
             done[key] = str(path)
-            result = run(path, args)
+            if left_out:
+                print(json.dumps({"trial": str(path), "left_out": left_out}))
+            result = run(path, (labels, X, rate), args)
         except (SpotlabError, ValueError) as exc:
             print(json.dumps({"trial": str(path), "skipped": " ".join(str(exc).split())}))
             continue

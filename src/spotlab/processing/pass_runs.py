@@ -77,7 +77,11 @@ def refuted_labels(
     when a confirmed run of the other pass contradicts it (puts the marker elsewhere in
     a frame, or gives its point to another marker), or when the other pass contradicts
     it and it adjoins, without a gap, a confirmed run of its own pass (the pass moved the
-    label onto the point the other pass confirms).
+    label onto the point the other pass confirms). Then, once: a run of the other pass
+    that differs from this one only where the labels just refuted lie is *cleared*, and
+    refutes as a confirmed run does (a pass that exchanged two markers for a few frames
+    made one mistake: when one half is refuted, the other half goes with it, refuted by
+    the labels the first half stood against).
     Two passes that agree on a wrong identity more than they disagree confirm it: this
     removes labels only where one pass's labels are borne out by the other.
 
@@ -102,13 +106,46 @@ def refuted_labels(
     n_own, n_theirs = max(int(own.max()) + 1, 1), max(int(theirs.max()) + 1, 1)
     confirmed_own = _confirmed(own, agree, differ, n_own)
     confirmed_theirs = _confirmed(theirs, agree, differ, n_theirs)
+    in_confirmed = (theirs >= 0) & confirmed_theirs[np.maximum(theirs, 0)]
+    refuted = _refuted_runs(
+        points, other, own, confirmed_own, in_confirmed, agree, differ, agree_mm
+    )
+    # (c) a second look: a run of the other pass that differs from this pass only where
+    # its labels were just refuted is cleared of that doubt, and refutes as a confirmed
+    # run does (two labels exchanged are one mistake: one half refuted, the other
+    # contradicted by the labels the refuted half stood against)
+    at_refuted = (own >= 0) & refuted[np.maximum(own, 0)]
+    labelled = theirs >= 0
+    n_differ = np.bincount(theirs[differ & labelled], minlength=n_theirs)
+    n_open = np.bincount(theirs[differ & labelled & ~at_refuted], minlength=n_theirs)
+    cleared = (n_differ > 0) & (n_open == 0)
+    in_trusted = in_confirmed | (labelled & cleared[np.maximum(theirs, 0)])
+    if (in_trusted != in_confirmed).any():
+        refuted = _refuted_runs(
+            points, other, own, confirmed_own, in_trusted, agree, differ, agree_mm
+        )
+    return (own >= 0) & refuted[np.maximum(own, 0)]
+
+
+def _refuted_runs(
+    points: FloatArray,
+    other: FloatArray,
+    own: IntArray,
+    confirmed_own: BoolArray,
+    in_trusted: BoolArray,
+    agree: BoolArray,
+    differ: BoolArray,
+    agree_mm: float,
+) -> BoolArray:
+    """(n,) runs ``own`` of ``points`` refuted by the other pass's labels ``in_trusted``
+    (F, M) (rules (a) and (b) of :func:`refuted_labels`)."""
+    n_own = len(confirmed_own)
     contradicted = np.bincount(own[differ], minlength=n_own) > 0
     # (a) contradicted by a confirmed run of the other pass: the marker elsewhere, or
     # its point given to another marker
-    in_confirmed = (theirs >= 0) & confirmed_theirs[np.maximum(theirs, 0)]
     doubtful = (own >= 0) & ~confirmed_own[np.maximum(own, 0)] & ~agree
-    hit = (differ & in_confirmed) | (
-        doubtful & _named_otherwise(points, other, in_confirmed, doubtful, agree_mm)
+    hit = (differ & in_trusted) | (
+        doubtful & _named_otherwise(points, other, in_trusted, doubtful, agree_mm)
     )
     by_confirmed = np.zeros(n_own, dtype=bool)
     by_confirmed[own[hit]] = True
@@ -118,8 +155,7 @@ def refuted_labels(
     later, earlier = own[1:][cut], own[:-1][cut]
     adjoins[later[confirmed_own[earlier]]] = True
     adjoins[earlier[confirmed_own[later]]] = True
-    refuted = ~confirmed_own & (by_confirmed | (contradicted & adjoins))
-    return (own >= 0) & refuted[np.maximum(own, 0)]
+    return np.asarray(~confirmed_own & (by_confirmed | (contradicted & adjoins)))
 
 
 def _confirmed(runs: IntArray, agree: BoolArray, differ: BoolArray, n: int) -> BoolArray:

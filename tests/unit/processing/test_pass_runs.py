@@ -63,3 +63,29 @@ def test_a_label_on_a_point_the_other_pass_names_otherwise_is_refuted() -> None:
     backward[:, 0] = np.nan  # the backward pass silent on marker 0
     refuted = refuted_labels(forward, backward, AGREE_MM, 20.0)
     assert refuted[12, 0] and refuted.sum() == 1
+
+
+def test_the_other_half_of_an_exchange_is_refuted_with_the_first() -> None:
+    # sample28/dynamic.C3D, seed 2, in small: the forward pass exchanges the two markers
+    # for a few frames; marker 0's wrong run adjoins its right one and is refuted, and
+    # marker 1's wrong run goes with it: the backward pass's marker 0 labels, which
+    # only the refuted run stood against, put marker 0 on that point.
+    truth = _two_markers()
+    forward = np.full_like(truth, np.nan)
+    forward[4:20, 0] = truth[4:20, 1]  # marker 0 on marker 1's point, then its own
+    forward[20:, 0] = truth[20:, 0]
+    forward[5:9, 1] = truth[5:9, 0]  # marker 1 on marker 0's point, then a gap
+    forward[22:, 1] = truth[22:, 1]
+    backward = np.full_like(truth, np.nan)
+    backward[:24, 1] = truth[:24, 1]
+    backward[6:9, 0] = truth[6:9, 0]
+    backward[20:, 0] = truth[20:, 0]
+    refuted = refuted_labels(forward, backward, AGREE_MM, 20.0)
+    assert refuted[4:20, 0].all() and refuted[5:9, 1].all() and refuted.sum() == 16 + 4
+    assert not refuted_labels(backward, forward, AGREE_MM, 20.0).any()
+    ones = np.full((F, 2), 0.1)
+    joined, counts = join_passes(PassResult(forward, ones), PassResult(backward, ones), 20.0)
+    assert np.array_equal(joined.points[:, 1], truth[:, 1])
+    labelled = np.isfinite(joined.points[:, 0, 0])
+    assert np.array_equal(joined.points[labelled, 0], truth[labelled, 0])
+    assert counts["systematic_markers"] == 0
