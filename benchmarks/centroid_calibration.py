@@ -20,7 +20,8 @@ ratio <= 1.05.
 
 Prints one JSON object per scene, then a summary line. Usage:
 ``python benchmarks/centroid_calibration.py [--scenes 10] [--first-seed 1000]
-[--wand-seconds 15] [--wand-rate 100] [--frame-seconds 5] [--frame-rate 200]``
+[--wand-seconds 20] [--wand-rate 200] [--frame-seconds 5] [--frame-rate 200]``
+(the defaults are the recordings docs/calibration.md advises).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.drivers.centroid import BlobFrames, CentroidConfig, CentroidDecoder, blobs_from_blocks
+from spotlab.geometry import Rig
 from spotlab.processing.blob_calibration_inputs import find_calibration_inputs
 from spotlab.processing.recording_calibration import calibrate_observations
 from spotlab.reconstruction import triangulate
@@ -105,7 +107,7 @@ def rigid_fit(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
     return R, mb - ma @ R.T
 
 
-def score(rig: Any, true_rig: Any, uv: FloatArray, X: FloatArray) -> dict[str, float]:
+def score(rig: Rig, true_rig: Rig, uv: FloatArray, X: FloatArray) -> dict[str, float]:
     """Held-out figures of a calibrated rig against the true one (see the module doc)."""
     P, Q = triangulate(rig, uv), triangulate(true_rig, uv)
     both = np.isfinite(P).all(-1) & np.isfinite(Q).all(-1)
@@ -159,8 +161,6 @@ def scene(seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
         ),
         WALK_S,
     )
-    from spotlab.geometry import Rig  # scoring only
-
     uv, X = walk_views(walk, truth)
     report = calibrated.result.report
     return {
@@ -180,8 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=1000, help="scene k: seeds S + 3k ...")
-    parser.add_argument("--wand-seconds", type=float, default=15.0)
-    parser.add_argument("--wand-rate", type=float, default=100.0)
+    parser.add_argument("--wand-seconds", type=float, default=20.0)
+    parser.add_argument("--wand-rate", type=float, default=200.0)
     parser.add_argument("--frame-seconds", type=float, default=5.0)
     parser.add_argument("--frame-rate", type=float, default=200.0)
     parser.add_argument("--distortion", default="auto")

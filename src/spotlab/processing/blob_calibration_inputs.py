@@ -282,10 +282,28 @@ def find_calibration_inputs(
 ) -> BlobCalibrationInputs:
     """The wand and the reference object found among decoded blobs.
 
-    As :func:`load_blob_recordings`, from blobs already decoded (an in-process
-    recording, a benchmark's scene): ``wand_rec`` and ``frame_rec`` the blobs of the
-    wand dance and of the static object, ``points`` (P, 3) its markers (mm); ``names``
-    (wand recording, frame recording, points table) name them in messages.
+    What :func:`load_blob_recordings` does once the journals are read: for blobs decoded
+    otherwise (an in-process recording, a benchmark's scene).
+
+    Parameters
+    ----------
+    wand_rec, frame_rec : BlobFrames
+        Blobs of the wand dance and of the static reference object (one hub, C cameras).
+    points : ndarray, shape (P, 3)
+        The object's marker coordinates (mm), 3 <= P <= 8.
+    wand_length, wand_middle, image_size
+        As :func:`load_blob_recordings`.
+    names : (str, str, str)
+        How messages name the wand recording, the frame recording and the points.
+
+    Returns
+    -------
+    BlobCalibrationInputs
+
+    Raises
+    ------
+    InputError
+        As :func:`load_blob_recordings`.
     """
     wand_name, frame_name, points_name = names
     if not wand_length > 0:
