@@ -201,7 +201,11 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     print(f"{both.sum()} body marker-frames: RMS {rms} mm, raw ratio {raw:.4f}, aligned "
           f"{aligned:.4f}; world frame turned {angle:.2e} rad, shifted {shift:.3f} mm at the "
           "markers' centre")  # fmt: skip
-    # MEASURED_PLACEHOLDER
+    # Target 1.05 (issue 11, docs/calibration.md). Measured through this test, five runs
+    # alone on the machine (2026-11-25): raw 1.0020-1.0285, aligned 0.997-1.002, turned
+    # 0.9-2.3e-5 rad, shifted 0.015-0.040 mm (the true rig's own error is 0.2 mm); in
+    # process on 20 scenes of other seeds (benchmarks/centroid_calibration.py) raw
+    # 1.003-1.043, aligned <= 1.012, shifted <= 0.053 mm.
     assert raw < 1.05
     assert aligned < 1.03 and angle < 1e-4 and shift < 0.1
 
