@@ -36,7 +36,9 @@ from spotlab.reconstruction import triangulate
 pytestmark = pytest.mark.xdist_group("centroid-lab")
 
 CAMERAS, WAND_LENGTH_MM = 8, 500.0
-WAND_S, FRAME_S, WALK_S = 15.0, 5.0, 3.0
+#: The wand dance as docs/calibration.md advises it: 20 s at 200 Hz (4000 images per
+#: camera; 15 s at 100 Hz left the world frame's placement at the walk too uncertain).
+WAND_S, WAND_HZ, FRAME_S, WALK_S = 20.0, 200, 5.0, 3.0
 STATIC_S, ROM_S = 2.0, 6.0
 #: The subject: a seed no model or template was made from.
 SUBJECT = 5
@@ -88,7 +90,7 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Lab:
         folder / "lframe.csv", folder / "true-rig.toml", folder / "walk-truth.npz",
         folder / "static.spj", folder / "rom.spj",
     )  # fmt: skip
-    _record(folder, lab.wand, WAND_S, 100, "--motion", "wand", "--seed", 1)
+    _record(folder, lab.wand, WAND_S, WAND_HZ, "--motion", "wand", "--seed", 1)
     _record(
         folder, lab.frame, FRAME_S, 200, "--motion", "lframe", "--seed", 2,
         "--frame-points-out", lab.frame_points,
@@ -181,29 +183,31 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     P = {k: triangulate(rig, uv) for k, rig in rigs.items()}
     both = np.isfinite(P["calibrated"]).all(-1) & np.isfinite(P["true"]).all(-1)
     assert both.sum() > 1000
-    # Two things are judged apart. The rig's own geometry: the calibrated points after
-    # the one rigid motion that best lays them on the truth, against the true rig's
-    # error. And where the L-frame put the world: that rigid motion itself.
+    # The target (issue 11) is in the world frame itself, what a lab gets: the raw
+    # ratio. Apart, for the diagnosis: the rig's own geometry (the calibrated points
+    # after the one rigid motion that best lays them on the truth) and where the wand
+    # and the L-frame put the world (that rigid motion itself).
     R, t = _rigid_fit(P["calibrated"][both], X[both])
     err = {
         "raw": np.linalg.norm(P["calibrated"][both] - X[both], axis=-1),
-        "calibrated": np.linalg.norm(P["calibrated"][both] @ R.T + t - X[both], axis=-1),
+        "aligned": np.linalg.norm(P["calibrated"][both] @ R.T + t - X[both], axis=-1),
         "true": np.linalg.norm(P["true"][both] - X[both], axis=-1),
     }
     rms = {k: float(np.sqrt(np.mean(e**2))) for k, e in err.items()}
-    ratio = rms["calibrated"] / rms["true"]
+    raw, aligned = rms["raw"] / rms["true"], rms["aligned"] / rms["true"]
     angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
     centre = X[both].mean(axis=0)
     shift = float(np.linalg.norm(centre @ R.T + t - centre))
-    print(f"{both.sum()} body marker-frames: RMS {rms} mm, ratio {ratio:.4f}; world frame "
-          f"turned {angle:.2e} rad, shifted {shift:.3f} mm at the markers' centre")  # fmt: skip
-    # The target is 5 % (docs/calibration.md). Measured through this test (5 runs): ratio
-    # 1.006-1.037 after the rigid motion, turned 1.3-2.6e-5 rad, shifted 0.021-0.101 mm
-    # (the true rig's own error is 0.2 mm); on 15 and 20 s windows of one 40 s wand
-    # dance with one L-frame recording 1.000-1.013. Which frames a recording catches,
-    # and their noise, move it: the bound leaves that room above the target.
-    assert ratio < 1.06
-    assert angle < 1e-4 and shift < 0.15
+    print(f"{both.sum()} body marker-frames: RMS {rms} mm, raw ratio {raw:.4f}, aligned "
+          f"{aligned:.4f}; world frame turned {angle:.2e} rad, shifted {shift:.3f} mm at the "
+          "markers' centre")  # fmt: skip
+    # Target 1.05 (issue 11, docs/calibration.md). Measured through this test, five runs
+    # alone on the machine (2026-11-25): raw 1.0020-1.0285, aligned 0.997-1.002, turned
+    # 0.9-2.3e-5 rad, shifted 0.015-0.040 mm (the true rig's own error is 0.2 mm); in
+    # process on 20 scenes of other seeds (benchmarks/centroid_calibration.py) raw
+    # 1.003-1.043, aligned <= 1.012, shifted <= 0.053 mm.
+    assert raw < 1.05
+    assert aligned < 1.03 and angle < 1e-4 and shift < 0.1
 
 
 def _rigid_fit(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:

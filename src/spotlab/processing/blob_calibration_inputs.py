@@ -46,7 +46,13 @@ from spotlab.processing.calibration_inputs import WandObservations
 from spotlab.processing.errors import InputError
 from spotlab.processing.tables import column, read_table
 
-__all__ = ["RATIO_MISMATCH", "SENSOR_SIZES", "BlobCalibrationInputs", "load_blob_recordings"]
+__all__ = [
+    "RATIO_MISMATCH",
+    "SENSOR_SIZES",
+    "BlobCalibrationInputs",
+    "find_calibration_inputs",
+    "load_blob_recordings",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -174,7 +180,7 @@ def _frame_points(path: Path) -> FloatArray:
 
 
 def _wand_layout(
-    blobs: BlobFrames, length: float, middle_mm: float | None, path: Path
+    blobs: BlobFrames, length: float, middle_mm: float | None, path: str
 ) -> tuple[int, float | None, float]:
     """Markers on the wand, its middle ratio (None for 2) and the ratio the images show."""
     blob_ok, image_ok = _usable(blobs)
@@ -257,13 +263,56 @@ def load_blob_recordings(
     points = _frame_points(frame_points_csv)
     wand_rec = read_blob_recording(wand_recording).blobs
     frame_rec = read_blob_recording(frame_recording).blobs
+    return find_calibration_inputs(
+        wand_rec, frame_rec, points, wand_length=wand_length, wand_middle=wand_middle,
+        image_size=image_size, names=(str(wand_recording), str(frame_recording),
+                                      str(frame_points_csv)),
+    )  # fmt: skip
+
+
+def find_calibration_inputs(
+    wand_rec: BlobFrames,
+    frame_rec: BlobFrames,
+    points: FloatArray,
+    *,
+    wand_length: float,
+    wand_middle: float | None = None,
+    image_size: Sequence[int] | None = None,
+    names: tuple[str, str, str] = ("the wand recording", "the frame recording", "the points"),
+) -> BlobCalibrationInputs:
+    """The wand and the reference object found among decoded blobs.
+
+    What :func:`load_blob_recordings` does once the journals are read: for blobs decoded
+    otherwise (an in-process recording, a benchmark's scene).
+
+    Parameters
+    ----------
+    wand_rec, frame_rec : BlobFrames
+        Blobs of the wand dance and of the static reference object (one hub, C cameras).
+    points : ndarray, shape (P, 3)
+        The object's marker coordinates (mm), 3 <= P <= 8.
+    wand_length, wand_middle, image_size
+        As :func:`load_blob_recordings`.
+    names : (str, str, str)
+        How messages name the wand recording, the frame recording and the points.
+
+    Returns
+    -------
+    BlobCalibrationInputs
+
+    Raises
+    ------
+    InputError
+        As :func:`load_blob_recordings`.
+    """
+    wand_name, frame_name, points_name = names
+    if not wand_length > 0:
+        raise InputError(f"--wand-length must be a positive length in mm, got {wand_length}")
     C = wand_rec.n_cameras
     if frame_rec.n_cameras != C:
-        raise InputError(
-            f"{frame_recording}: {frame_rec.n_cameras} cameras, the wand recording has {C}"
-        )
+        raise InputError(f"{frame_name}: {frame_rec.n_cameras} cameras, the wand recording has {C}")
     size, source = _image_size(wand_rec, image_size)
-    markers, ratio, seen = _wand_layout(wand_rec, wand_length, wand_middle, wand_recording)
+    markers, ratio, seen = _wand_layout(wand_rec, wand_length, wand_middle, wand_name)
     blob_ok, image_ok = _usable(wand_rec)
     wand = find_wand(
         wand_rec.uv, wand_rec.offsets, C, markers=markers, middle_ratio=ratio,
@@ -278,9 +327,9 @@ def load_blob_recordings(
     if sum(found) < 2:
         detail = ", ".join(f"cam{c + 1} {s}" for c, s in enumerate(frame.status))
         raise InputError(
-            f"{frame_recording}: the reference object's {points.shape[0]} markers were told "
+            f"{frame_name}: the reference object's {points.shape[0]} markers were told "
             f"apart in {sum(found)} camera(s), 2 at least are needed ({detail}); is it the "
-            f"object of {frame_points_csv}, standing still?"
+            f"object of {points_name}, standing still?"
         )
     obs = WandObservations(wand.ends, frame.uv, points, size)
     return BlobCalibrationInputs(obs, wand, frame, markers, ratio, seen, source, wand_rec)
