@@ -5,7 +5,8 @@ What ``spotlab calibrate WAND.spj --wand-length 500 --frame-recording FRAME.spj
 hub (``spotlab sim centroid``) waves a 3-marker wand (seed ``w``), shows its L-frame
 (seed ``w + 1``) and a subject walks (seed ``w + 2``); the cameras do not depend on the
 seed. Each scene's frames are rendered on the device's own time axis (no pacing, no
-journal: the bytes a recording would hold, decoded by the driver's decoder), the wand and
+journal: the bytes a recording would hold, decoded by the driver's decoder:
+:func:`spotlab.testing.centroid_scene.centroid_scene`), the wand and
 the L-frame are found among the blobs and the rig calibrated by the functions
 ``spotlab calibrate`` calls (``find_calibration_inputs``, ``calibrate_observations``).
 
@@ -29,73 +30,22 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.drivers.centroid import BlobFrames, CentroidConfig, CentroidDecoder, blobs_from_blocks
 from spotlab.geometry import Rig
 from spotlab.processing.blob_calibration_inputs import find_calibration_inputs
 from spotlab.processing.recording_calibration import calibrate_observations
 from spotlab.reconstruction import triangulate
-from spotlab.simulators import wire
-from spotlab.simulators.centroid_service import (
-    LFRAME_MARKERS,
-    CentroidSimOptions,
-    build_centroid_device,
-)
+from spotlab.simulators.centroid_service import LFRAME_MARKERS
 from spotlab.simulators.motions import reference_markers
+from spotlab.testing.centroid_scene import centroid_scene
 
 FloatArray = NDArray[np.float64]
 CAMERAS, WAND_LENGTH_MM, WALK_S, WALK_HZ = 8, 500.0, 3.0, 100.0
-
-
-def record(options: CentroidSimOptions, seconds: float) -> BlobFrames:
-    """The blobs of ``seconds`` of a simulated hub's stream, as a recording would decode
-    them (frames rendered on the device's time axis, fed to the driver's decoder)."""
-    device = build_centroid_device(options, now_ns=0)
-    t = 1_000_000_000
-    device.receive(wire.command("COMM:11"), t)
-    t += 50_000_000
-    device.output(t)
-    device.receive(wire.command("START:"), t, line_baud=12_000_000)
-    decoder = CentroidDecoder(CentroidConfig.create(cameras=CAMERAS, rate_hz=options.rate_hz))
-    period = round(1e9 / options.rate_hz)
-    blocks = []
-    for _ in range(round(seconds * options.rate_hz)):
-        t += period
-        blocks.append(decoder.feed(device.output(t), t))
-    device.receive(wire.command("STOP:"), t)
-    device.output(t + 50_000_000)
-    if device.truth is not None:
-        device.truth.write()
-    return blobs_from_blocks(blocks)
-
-
-def walk_views(blobs: BlobFrames, truth_path: Path) -> tuple[FloatArray, FloatArray]:
-    """Scoring only: the walk's marker blobs (C, F, M, 2) by the truth's labels and the
-    true markers (F, M, 3) mm. A decoded frame is the truth row of the same hub tick."""
-    truth = np.load(truth_path)
-    row_of = {
-        int(tick) % (1 << 32): r
-        for r, (tick, sent) in enumerate(zip(truth["hub_tick_us"], truth["sent"], strict=True))
-        if sent
-    }
-    C, F, M = blobs.n_cameras, blobs.n_frames, truth["markers_mm"].shape[1]
-    uv, X = np.full((C, F, M, 2), np.nan), np.full((F, M, 3), np.nan)
-    offsets = truth["blob_offsets"]
-    for f in range(F):
-        r = row_of[int(blobs.ticks[f]) % (1 << 32)]
-        X[f] = truth["markers_mm"][r]
-        for c in range(C):
-            lo, hi = int(offsets[r * C + c]), int(offsets[r * C + c + 1])
-            own = truth["blob_kind"][lo:hi] == 0
-            uv[c, f, truth["blob_marker"][lo:hi][own]] = blobs.uv[blobs.slice(f, c)][own]
-    return uv, X
 
 
 def rigid_fit(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -130,21 +80,18 @@ def score(rig: Rig, true_rig: Rig, uv: FloatArray, X: FloatArray) -> dict[str, f
     }
 
 
-def scene(seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
+def scene(seed: int, args: argparse.Namespace) -> dict[str, Any]:
     """Record, calibrate and score one scene (wand ``seed``, L-frame ``seed + 1``, walk
     ``seed + 2``)."""
     sim = {"cameras": CAMERAS}
     t0 = time.perf_counter()
-    wand = record(
-        CentroidSimOptions(**sim, motion="wand", markers=3, rate_hz=args.wand_rate, seed=seed),
-        args.wand_seconds,
-    )
-    frame = record(
-        CentroidSimOptions(
-            **sim, motion="lframe", markers=LFRAME_MARKERS, rate_hz=args.frame_rate, seed=seed + 1
-        ),
-        args.frame_seconds,
-    )
+    wand = centroid_scene(
+        args.wand_seconds, args.wand_rate, seed=seed, motion="wand", markers=3, **sim
+    ).blobs
+    frame = centroid_scene(
+        args.frame_seconds, args.frame_rate, seed=seed + 1, motion="lframe",
+        markers=LFRAME_MARKERS, **sim,
+    ).blobs  # fmt: skip
     rendered = time.perf_counter() - t0
     points = reference_markers(LFRAME_MARKERS).points  # what --frame-points-out writes
     t0 = time.perf_counter()
@@ -154,14 +101,7 @@ def scene(seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
     )
     elapsed = time.perf_counter() - t0
     # Scoring: the only place that reads the simulator's truth.
-    truth, rig_path = folder / f"walk-{seed}.npz", folder / "true-rig.toml"
-    walk = record(
-        CentroidSimOptions(
-            **sim, motion="walk", rate_hz=WALK_HZ, seed=seed + 2, truth=truth, rig_out=rig_path
-        ),
-        WALK_S,
-    )
-    uv, X = walk_views(walk, truth)
+    walk = centroid_scene(WALK_S, WALK_HZ, seed=seed + 2, motion="walk", **sim)
     report = calibrated.result.report
     return {
         "bench": "centroid_calibration",
@@ -172,7 +112,7 @@ def scene(seed: int, args: argparse.Namespace, folder: Path) -> dict[str, Any]:
         "lens_terms": [len(c["distortion"]["fitted"]) for c in report["cameras"]],
         "render_s": round(rendered, 2),
         "calibrate_s": round(elapsed, 2),
-        **score(calibrated.result.rig, Rig.load(rig_path), uv, X),
+        **score(calibrated.result.rig, walk.rig, walk.oracle_uv(), walk.markers_mm),
     }
 
 
@@ -187,11 +127,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--distortion", default="auto")
     args = parser.parse_args(argv)
     ratios = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for k in range(args.scenes):
-            row = scene(args.first_seed + 3 * k, args, Path(tmp))
-            ratios.append(row["raw_ratio"])
-            print(json.dumps(row), flush=True)
+    for k in range(args.scenes):
+        row = scene(args.first_seed + 3 * k, args)
+        ratios.append(row["raw_ratio"])
+        print(json.dumps(row), flush=True)
     r = np.array(ratios)
     summary = {
         "bench": "centroid_calibration",
