@@ -16,7 +16,8 @@ Two jobs, both on the 3-D points of one frame:
   missing after the segment fits (a marker on no rigid cluster, or a segment with fewer
   than three markers in view) are labelled by the distance ranges to their labelled
   partners (:class:`.model.Link`, segment mates), only where the point and the marker
-  fit each other and nothing else.
+  fit each other and nothing else, and two segment mates labelled so together keep
+  their segment distance.
 """
 
 from __future__ import annotations
@@ -357,7 +358,8 @@ def _linked_labels(
     A free point fits a missing marker when its distances to at least ``min_links``
     labelled markers linked to it (segment mates included) are all within their ranges
     (``tol_mm`` beyond); a pair is taken only where the marker fits one point and the
-    point fits one marker, so two candidates leave both unlabelled.
+    point fits one marker, so two candidates leave both unlabelled; two markers of one
+    cluster taken in the same round must keep their cluster distance (:func:`_agreeing`).
     """
     free = np.flatnonzero(labels < 0)
     missing = np.flatnonzero(point_of < 0)
@@ -378,6 +380,8 @@ def _linked_labels(
     fits = (bad == 0) & (n_checks >= min_links)[None]  # (P, missing)
     unique = fits & (fits.sum(axis=1, keepdims=True) == 1) & (fits.sum(axis=0) == 1)[None]
     p, k = np.nonzero(unique)
+    keep = _agreeing(model, points, free[p], missing[k], tol_mm)
+    p, k = p[keep], k[keep]
     labels[free[p]] = missing[k]
     point_of[missing[k]] = free[p]
     return bool(p.size)
@@ -456,3 +460,36 @@ def _segment_choice(
     if choice.margin < margin_mm:
         return None
     return choice.rms, np.array(choice.assignment, dtype=np.intp)
+
+
+def _agreeing(
+    model: MarkerModel, points: FloatArray, rows: IntArray, markers: IntArray, tol_mm: float
+) -> NDArray[np.bool_]:
+    """Which of the labels :func:`_linked_labels` takes in one round (marker
+    ``markers[n]`` on point ``rows[n]``, shape (N,)) to keep, shape (N,).
+
+    Each was judged against the markers labelled before, not against the others of its
+    round. Two markers of one cluster labelled in the same round must keep their
+    cluster distance (``tol_mm`` beyond its range), the model's tightest: where they do
+    not, neither is taken (one distance cannot say which is wrong). Nothing would refuse
+    the pair later: :func:`inconsistent_labels` weighs that distance against the wider
+    links and drops by the majority (``Walk1.c3d`` seed 1: the toe's label on the heel's
+    point, taken with the ankle's 62 mm short of their range, kept for 22 frames).
+    """
+    keep = np.ones(markers.size, dtype=bool)
+    if markers.size < 2:
+        return keep
+    slot = np.full(len(model.labels), -1, dtype=np.intp)
+    slot[markers] = np.arange(markers.size)
+    n = sum(len(seg.markers) * (len(seg.markers) - 1) // 2 for seg in model.segments)
+    i, j, lo, hi = (v[:n] for v in model.intervals)  # the cluster pairs come first
+    a, b = slot[i], slot[j]
+    both = np.flatnonzero((a >= 0) & (b >= 0))
+    if both.size == 0:
+        return keep
+    a, b = a[both], b[both]
+    d = _length(points[rows[a]] - points[rows[b]])
+    bad = (d < lo[both] - tol_mm) | (d > hi[both] + tol_mm)
+    keep[a[bad]] = False
+    keep[b[bad]] = False
+    return keep
