@@ -28,7 +28,6 @@ from spotlab.core.errors import CalibrationError, ReconstructionError
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
-from spotlab.reconstruction.identification.crossed_rays import crossed_rays
 from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 from spotlab.reconstruction.identification.handedness import misplaced_segments
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
@@ -153,7 +152,6 @@ class Identifier:
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
-        self._crossed = np.zeros(0, dtype=bool)  # per track (:mod:`.crossed_rays`)
 
     def __call__(
         self, frame: BlobFrame, unusable: NDArray[np.bool_] | None = None
@@ -205,11 +203,6 @@ class Identifier:
         used[index[kept]] = True
         long_gap = tracks.missed >= self.keep_label_frames
         tracks.update(X, _rms(ray), kept.sum(axis=0))
-        floor = -np.inf if self.floor_mm is None else self.floor_mm
-        current = (tracks.missed == 0) & (tracks.position[:, 2] >= floor)
-        crossed = crossed_rays(
-            self.geom, tracks.position, current, index, kept, xy, self.gate_px, self.tol_mm
-        )
         # After more than a short gap a track may have caught another marker's blobs:
         # its label is earned again, from the cluster fit or the links (checks of the
         # track by far partners with wide link ranges would let a wrong one pass).
@@ -223,10 +216,7 @@ class Identifier:
         tracks.age[back] = 0
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
         self._check_calibration(camera, usable, used)
-        alive = tracks.missed <= self.bridge_frames
-        tracks.keep(alive)
-        # points of two rays another point's blob may have made take no label by links
-        self._crossed = np.concatenate([crossed, np.zeros(alive.size - crossed.size, bool)])[alive]
+        tracks.keep(tracks.missed <= self.bridge_frames)
         self._label()
         return self._result(flags)
 
@@ -328,7 +318,6 @@ class Identifier:
                 rms_mm=self.rms_mm,
                 margin_mm=self.margin_mm,
                 anchors=self._anchors,
-                linkable=~self._crossed[rows],
             )
             new = rows[(labels >= 0) & (tracks.label[rows] < 0)]
             if new.size:
