@@ -28,6 +28,7 @@ from spotlab.core.errors import CalibrationError, ReconstructionError
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
+from spotlab.reconstruction.identification.crossed_rays import crossed_rays
 from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 from spotlab.reconstruction.identification.handedness import misplaced_segments
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
@@ -152,6 +153,7 @@ class Identifier:
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
+        self._crossed = np.zeros(0, dtype=bool)  # per track (:mod:`.crossed_rays`)
 
     def __call__(
         self, frame: BlobFrame, unusable: NDArray[np.bool_] | None = None
@@ -203,6 +205,11 @@ class Identifier:
         used[index[kept]] = True
         long_gap = tracks.missed >= self.keep_label_frames
         tracks.update(X, _rms(ray), kept.sum(axis=0))
+        floor = -np.inf if self.floor_mm is None else self.floor_mm
+        current = (tracks.missed == 0) & (tracks.position[:, 2] >= floor)
+        crossed = crossed_rays(
+            self.geom, tracks.position, current, index, kept, xy, self.gate_px, self.tol_mm
+        )
         # After more than a short gap a track may have caught another marker's blobs:
         # its label is earned again, from the cluster fit or the links (checks of the
         # track by far partners with wide link ranges would let a wrong one pass).
@@ -216,7 +223,10 @@ class Identifier:
         tracks.age[back] = 0
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
         self._check_calibration(camera, usable, used)
-        tracks.keep(tracks.missed <= self.bridge_frames)
+        alive = tracks.missed <= self.bridge_frames
+        tracks.keep(alive)
+        # points of two rays another point's blob may have made take no label by links
+        self._crossed = np.concatenate([crossed, np.zeros(alive.size - crossed.size, bool)])[alive]
         self._label()
         return self._result(flags)
 
@@ -318,6 +328,7 @@ class Identifier:
                 rms_mm=self.rms_mm,
                 margin_mm=self.margin_mm,
                 anchors=self._anchors,
+                linkable=~self._crossed[rows],
             )
             new = rows[(labels >= 0) & (tracks.label[rows] < 0)]
             if new.size:

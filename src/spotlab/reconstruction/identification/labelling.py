@@ -150,6 +150,7 @@ def assign_labels(
     near_mm: float = 600.0,
     anchors: FloatArray | None = None,
     min_links: int = 3,
+    linkable: NDArray[np.bool_] | None = None,
 ) -> IntArray:
     """Labels for the unlabelled points of one frame.
 
@@ -173,6 +174,9 @@ def assign_labels(
     min_links : int
         Labelled partners (links or segment mates) a marker needs to be labelled by
         distance ranges alone, after the segment fits.
+    linkable : ndarray of bool, shape (K,), optional
+        Points that may take a label by distance ranges alone (default: all); the
+        others still count as candidates (two leave a marker unlabelled).
 
     Returns
     -------
@@ -221,11 +225,12 @@ def assign_labels(
         for other in pending:
             if other in known and np.isin(known[other][1], taken).any():
                 del known[other]
+    can = np.ones(K, dtype=bool) if linkable is None else linkable
     for _ in range(3):  # labels found by links constrain the next markers
-        if not _linked_labels(model, points, out, point_of, tol_mm, min_links):
+        if not _linked_labels(model, points, out, point_of, tol_mm, min_links, can):
             break
-    if _exchanged_labels(model, points, out, point_of, tol_mm, min_links):
-        _linked_labels(model, points, out, point_of, tol_mm, min_links)
+    if _exchanged_labels(model, points, out, point_of, tol_mm, min_links, can):
+        _linked_labels(model, points, out, point_of, tol_mm, min_links, can)
     return out
 
 
@@ -282,6 +287,7 @@ def _exchanged_labels(
     point_of: IntArray,
     tol_mm: float,
     min_links: int,
+    linkable: NDArray[np.bool_],
 ) -> bool:
     """Undo a label taken by the wrong one of two nearby markers; True if any was.
 
@@ -322,6 +328,8 @@ def _exchanged_labels(
         if not q_off[q_ok][0] < p_off[0]:
             continue
         q = int(free[q_ok][0])
+        if not linkable[q]:
+            continue
         point_of[m] = -1
         p_fits = []
         for m2 in missing:
@@ -352,6 +360,7 @@ def _linked_labels(
     point_of: IntArray,
     tol_mm: float,
     min_links: int,
+    linkable: NDArray[np.bool_],
 ) -> bool:
     """Label free points by the distance ranges to labelled markers; True if any was.
 
@@ -379,6 +388,7 @@ def _linked_labels(
     np.add.at(bad.T, slot, (~ok).T.astype(np.intp))
     fits = (bad == 0) & (n_checks >= min_links)[None]  # (P, missing)
     unique = fits & (fits.sum(axis=1, keepdims=True) == 1) & (fits.sum(axis=0) == 1)[None]
+    unique &= linkable[free][:, None]  # the others count as candidates, never take one
     p, k = np.nonzero(unique)
     keep = _agreeing(model, points, free[p], missing[k], tol_mm)
     p, k = p[keep], k[keep]
