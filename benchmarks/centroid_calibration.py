@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from spotlab.geometry import Rig
 from spotlab.processing.blob_calibration_inputs import find_calibration_inputs
 from spotlab.processing.recording_calibration import calibrate_observations
-from spotlab.reconstruction import triangulate
+from spotlab.reconstruction import rigid_fit, triangulate
 from spotlab.simulators.centroid_service import LFRAME_MARKERS
 from spotlab.simulators.motions import reference_markers
 from spotlab.testing.centroid_scene import centroid_scene
@@ -48,21 +48,13 @@ FloatArray = NDArray[np.float64]
 CAMERAS, WAND_LENGTH_MM, WALK_S, WALK_HZ = 8, 500.0, 3.0, 100.0
 
 
-def rigid_fit(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Rotation R and translation t minimising |A R^T + t - B| (points (N, 3), mm)."""
-    ma, mb = A.mean(axis=0), B.mean(axis=0)
-    U, _, Vt = np.linalg.svd((A - ma).T @ (B - mb))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    R = (U @ D @ Vt).T
-    return R, mb - ma @ R.T
-
-
 def score(rig: Rig, true_rig: Rig, uv: FloatArray, X: FloatArray) -> dict[str, float]:
     """Held-out figures of a calibrated rig against the true one (see the module doc)."""
     P, Q = triangulate(rig, uv), triangulate(true_rig, uv)
     both = np.isfinite(P).all(-1) & np.isfinite(Q).all(-1)
     A, B, T = P[both], Q[both], X[both]
-    R, t = rigid_fit(A, T)
+    Rs, ts, _ = rigid_fit(A, T[None])  # T ≈ A R^T + t
+    R, t = Rs[0], ts[0]
     rms = {
         "raw": float(np.sqrt(np.mean(np.sum((A - T) ** 2, -1)))),
         "aligned": float(np.sqrt(np.mean(np.sum((A @ R.T + t - T) ** 2, -1)))),

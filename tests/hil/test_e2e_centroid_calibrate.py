@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from spotlab.geometry import Rig
 from spotlab.io import read_c3d
 from spotlab.processing.blob_trajectories import read_blob_recording
-from spotlab.reconstruction import triangulate
+from spotlab.reconstruction import rigid_fit, triangulate
 
 # one worker runs this module, so its session recordings are made once (make test: --dist loadgroup)
 pytestmark = pytest.mark.xdist_group("centroid-lab")
@@ -187,7 +187,8 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     # ratio. Apart, for the diagnosis: the rig's own geometry (the calibrated points
     # after the one rigid motion that best lays them on the truth) and where the wand
     # and the L-frame put the world (that rigid motion itself).
-    R, t = _rigid_fit(P["calibrated"][both], X[both])
+    Rs, ts, _ = rigid_fit(P["calibrated"][both], X[both][None])  # X ≈ P R^T + t
+    R, t = Rs[0], ts[0]
     err = {
         "raw": np.linalg.norm(P["calibrated"][both] - X[both], axis=-1),
         "aligned": np.linalg.norm(P["calibrated"][both] @ R.T + t - X[both], axis=-1),
@@ -208,15 +209,6 @@ def test_a_rig_calibrated_from_centroid_recordings_triangulates_like_the_true_on
     # 1.003-1.043, aligned <= 1.012, shifted <= 0.053 mm.
     assert raw < 1.05
     assert aligned < 1.03 and angle < 1e-4 and shift < 0.1
-
-
-def _rigid_fit(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Rotation R and translation t minimising |A R^T + t - B| (points (N, 3), mm)."""
-    ma, mb = A.mean(axis=0), B.mean(axis=0)
-    U, _, Vt = np.linalg.svd((A - ma).T @ (B - mb))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    R = (U @ D @ Vt).T
-    return R, mb - ma @ R.T
 
 
 @pytest.mark.timeout(180)
