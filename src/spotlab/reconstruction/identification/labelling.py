@@ -29,6 +29,12 @@ from scipy.optimize import linear_sum_assignment
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction._rigid_identity import choose_identity
 from spotlab.reconstruction.identification.handedness import Reference, wrong_way_round
+from spotlab.reconstruction.identification.link_ranges import (
+    agreeing_labels,
+    fit_counts,
+    length,
+    link_fit,
+)
 from spotlab.reconstruction.identification.model import MarkerModel, Segment
 from spotlab.reconstruction.rigid import rigid_fit
 
@@ -36,13 +42,6 @@ __all__ = ["assign_labels", "inconsistent_labels"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-
-
-def _length(v: FloatArray) -> FloatArray:
-    """Euclidean lengths of vectors (..., 3), summed in the order of
-    :func:`numpy.linalg.norm` (``(x^2 + y^2) + z^2``) without its overhead."""
-    s = v * v
-    return np.asarray(np.sqrt((s[..., 0] + s[..., 1]) + s[..., 2]))
 
 
 def inconsistent_labels(
@@ -67,7 +66,7 @@ def inconsistent_labels(
         True for labels to drop.
     """
     i, j, lo, hi = model.intervals
-    dist = _length(points[i] - points[j])
+    dist = length(points[i] - points[j])
     err = np.maximum(np.maximum(lo - dist, dist - hi), 0.0)  # NaN where one is missing
     both = np.isfinite(err)
     bad = both & (err > tol_mm)
@@ -100,7 +99,7 @@ def _tree(
     fixed_local[have] = np.arange(have.size)
     free_local = np.arange(have.size, local.size)
     X = points[local]
-    dist = _length(X[:, None] - X[None])
+    dist = length(X[:, None] - X[None])
     other = ~np.eye(local.size, dtype=bool)  # a point is one marker at most
     rows = np.zeros((1, 0), dtype=np.intp)
     for p in range(model.shape[0]):
@@ -234,52 +233,6 @@ def assign_labels(
     return out
 
 
-def _link_fit(
-    model: MarkerModel,
-    points: FloatArray,
-    point_of: IntArray,
-    marker: int,
-    candidates: IntArray,
-    tol_mm: float,
-    min_links: int,
-) -> tuple[NDArray[np.bool_], FloatArray]:
-    """Which ``candidates`` (points) fit ``marker`` by its links to labelled markers
-    (all within range, ``tol_mm`` beyond, at least ``min_links`` of them), and how far
-    each sits from the middle of its ranges (RMS over the links, in half-widths)."""
-    partner, lo, hi = model.partners[marker]
-    have = point_of[partner] >= 0
-    if have.sum() < min_links:
-        return np.zeros(candidates.size, dtype=bool), np.full(candidates.size, np.inf)
-    lo_, hi_ = lo[have], hi[have]
-    d = _length(points[candidates][:, None] - points[point_of[partner[have]]][None])
-    ok = ((d >= lo_ - tol_mm) & (d <= hi_ + tol_mm)).all(axis=1)
-    half = np.maximum(0.5 * (hi_ - lo_), tol_mm)
-    off = np.sqrt(np.mean(((d - 0.5 * (lo_ + hi_)) / half) ** 2, axis=1))
-    return np.asarray(ok), off
-
-
-def _fit_counts(
-    model: MarkerModel,
-    points: FloatArray,
-    point_of: IntArray,
-    free: IntArray,
-    tol_mm: float,
-    min_links: int,
-) -> IntArray:
-    """For every marker, how many of the ``free`` points fit it by its ranges to the
-    labelled markers, as :func:`_link_fit` judges (its own label left aside), shape (M,)."""
-    M = point_of.size
-    m_all, n_all, lo, hi = model.directed
-    use = point_of[n_all] >= 0
-    m_c, n_c = m_all[use], n_all[use]
-    d = _length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
-    ok = (d >= lo[use] - tol_mm) & (d <= hi[use] + tol_mm)
-    cell = (np.arange(free.size)[:, None] * M + m_c[None]).ravel()
-    bad = np.bincount(cell[~ok.ravel()], minlength=free.size * M).reshape(free.size, M)
-    fits = (bad == 0) & (np.bincount(m_c, minlength=M) >= min_links)[None]
-    return np.asarray(fits.sum(axis=0), dtype=np.intp)
-
-
 def _exchanged_labels(
     model: MarkerModel,
     points: FloatArray,
@@ -308,7 +261,7 @@ def _exchanged_labels(
     if free.size == 0 or not (point_of < 0).any():
         return False
     # Until a label is exchanged, the free points fitting each marker: one pass for all.
-    n_fit = _fit_counts(model, points, point_of, free, tol_mm, min_links)
+    n_fit = fit_counts(model, points, point_of, free, tol_mm, min_links)
     for m in markers:
         if not changed and n_fit[m] != 1:
             continue
@@ -318,12 +271,12 @@ def _exchanged_labels(
             break
         p = int(point_of[m])
         point_of[m] = -1  # judged without its own label
-        q_ok, q_off = _link_fit(model, points, point_of, int(m), free, tol_mm, min_links)
+        q_ok, q_off = link_fit(model, points, point_of, int(m), free, tol_mm, min_links)
         if q_ok.sum() != 1:
             point_of[m] = p
             continue
         here = np.array([p], dtype=np.intp)
-        _, p_off = _link_fit(model, points, point_of, int(m), here, tol_mm, min_links)
+        _, p_off = link_fit(model, points, point_of, int(m), here, tol_mm, min_links)
         point_of[m] = p
         if not q_off[q_ok][0] < p_off[0]:
             continue
@@ -333,7 +286,7 @@ def _exchanged_labels(
         point_of[m] = -1
         p_fits = []
         for m2 in missing:
-            ok, off = _link_fit(model, points, point_of, int(m2), here, tol_mm, min_links)
+            ok, off = link_fit(model, points, point_of, int(m2), here, tol_mm, min_links)
             if ok[0]:
                 p_fits.append((int(m2), float(off[0])))
         point_of[m] = p
@@ -341,7 +294,7 @@ def _exchanged_labels(
         if len(p_fits) != 1 or not p_fits[0][1] < p_off[0]:
             continue
         q_fits_missing = any(
-            _link_fit(model, points, point_of, int(m2), np.array([q]), tol_mm, min_links)[0][0]
+            link_fit(model, points, point_of, int(m2), np.array([q]), tol_mm, min_links)[0][0]
             for m2 in missing
         )
         if q_fits_missing:
@@ -368,7 +321,8 @@ def _linked_labels(
     labelled markers linked to it (segment mates included) are all within their ranges
     (``tol_mm`` beyond); a pair is taken only where the marker fits one point and the
     point fits one marker, so two candidates leave both unlabelled; two markers of one
-    cluster taken in the same round must keep their cluster distance (:func:`_agreeing`).
+    cluster taken in the same round must keep their cluster distance
+    (:func:`.link_ranges.agreeing_labels`).
     """
     free = np.flatnonzero(labels < 0)
     missing = np.flatnonzero(point_of < 0)
@@ -380,7 +334,7 @@ def _linked_labels(
     if not use.any():
         return False
     m_c, n_c, lo_c, hi_c = m_all[use], n_all[use], lo2[use], hi2[use]
-    dist = _length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
+    dist = length(points[free][:, None] - points[point_of[n_c]][None])  # (P, L)
     ok = (dist >= lo_c - tol_mm) & (dist <= hi_c + tol_mm)
     slot = np.searchsorted(missing, m_c)
     n_checks = np.bincount(slot, minlength=missing.size)
@@ -390,7 +344,7 @@ def _linked_labels(
     unique = fits & (fits.sum(axis=1, keepdims=True) == 1) & (fits.sum(axis=0) == 1)[None]
     unique &= linkable[free][:, None]  # the others count as candidates, never take one
     p, k = np.nonzero(unique)
-    keep = _agreeing(model, points, free[p], missing[k], tol_mm)
+    keep = agreeing_labels(model, points, free[p], missing[k], tol_mm)
     p, k = p[keep], k[keep]
     labels[free[p]] = missing[k]
     point_of[missing[k]] = free[p]
@@ -470,36 +424,3 @@ def _segment_choice(
     if choice.margin < margin_mm:
         return None
     return choice.rms, np.array(choice.assignment, dtype=np.intp)
-
-
-def _agreeing(
-    model: MarkerModel, points: FloatArray, rows: IntArray, markers: IntArray, tol_mm: float
-) -> NDArray[np.bool_]:
-    """Which of the labels :func:`_linked_labels` takes in one round (marker
-    ``markers[n]`` on point ``rows[n]``, shape (N,)) to keep, shape (N,).
-
-    Each was judged against the markers labelled before, not against the others of its
-    round. Two markers of one cluster labelled in the same round must keep their
-    cluster distance (``tol_mm`` beyond its range), the model's tightest: where they do
-    not, neither is taken (one distance cannot say which is wrong). Nothing would refuse
-    the pair later: :func:`inconsistent_labels` weighs that distance against the wider
-    links and drops by the majority (``Walk1.c3d`` seed 1: the toe's label on the heel's
-    point, taken with the ankle's 62 mm short of their range, kept for 22 frames).
-    """
-    keep = np.ones(markers.size, dtype=bool)
-    if markers.size < 2:
-        return keep
-    slot = np.full(len(model.labels), -1, dtype=np.intp)
-    slot[markers] = np.arange(markers.size)
-    n = sum(len(seg.markers) * (len(seg.markers) - 1) // 2 for seg in model.segments)
-    i, j, lo, hi = (v[:n] for v in model.intervals)  # the cluster pairs come first
-    a, b = slot[i], slot[j]
-    both = np.flatnonzero((a >= 0) & (b >= 0))
-    if both.size == 0:
-        return keep
-    a, b = a[both], b[both]
-    d = _length(points[rows[a]] - points[rows[b]])
-    bad = (d < lo[both] - tol_mm) | (d > hi[both] + tol_mm)
-    keep[a[bad]] = False
-    keep[b[bad]] = False
-    return keep
