@@ -58,15 +58,21 @@ def _finished(proc: Processor, tid: str) -> dict[str, Any]:
     return job
 
 
-def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> None:
-    root, store = lab["root"], lab["store"]
-    proc = Processor(store, lab["rig"], lab["model"], root / "lab.toml")
+def _process(lab: dict[str, Any], model: Any) -> tuple[Processor, TrialInfo, dict[str, Any]]:
+    """ "Process" the recorded trial with the lab's rig and ``model``; the (closed)
+    processor, the trial and its finished job."""
+    proc = Processor(lab["store"], lab["rig"], model, lab["root"] / "lab.toml")
     try:
-        info = store.load("S01.walk.t1")
+        info = lab["store"].load("S01.walk.t1")
         proc.submit(info)
-        job = _finished(proc, info.id)
+        return proc, info, _finished(proc, info.id)
     finally:
         proc.close()
+
+
+def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> None:
+    root, store = lab["root"], lab["store"]
+    proc, info, job = _process(lab, lab["model"])
     assert job["state"] == "done" and job["path"] == "identification", job
     result = proc.result(info)
     assert result is not None
@@ -90,12 +96,5 @@ def test_a_hub_trial_is_identified_with_the_labs_model(lab: dict[str, Any]) -> N
 
 
 def test_without_a_model_the_job_fails_and_says_why(lab: dict[str, Any]) -> None:
-    root, store = lab["root"], lab["store"]
-    proc = Processor(store, lab["rig"], None, root / "lab.toml")
-    try:
-        info = store.load("S01.walk.t1")
-        proc.submit(info)
-        job = _finished(proc, info.id)
-    finally:
-        proc.close()
+    _, _, job = _process(lab, None)
     assert job["state"] == "failed" and "model" in job["error"], job
