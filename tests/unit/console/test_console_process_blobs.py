@@ -59,7 +59,7 @@ def _finished(proc: Processor, tid: str) -> dict[str, Any]:
 
 
 def _process(lab: dict[str, Any], model: Any) -> tuple[Processor, TrialInfo, dict[str, Any]]:
-    """ "Process" the recorded trial with the lab's rig and ``model``; the (closed)
+    """Run "Process" on the recorded trial with the lab's rig and ``model``; the (closed)
     processor, the trial and its finished job."""
     proc = Processor(lab["store"], lab["rig"], model, lab["root"] / "lab.toml")
     try:
