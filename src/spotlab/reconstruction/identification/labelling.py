@@ -28,6 +28,7 @@ from scipy.optimize import linear_sum_assignment
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction._rigid_identity import choose_identity
+from spotlab.reconstruction.identification.candidate_sides import turned_over
 from spotlab.reconstruction.identification.handedness import Reference, wrong_way_round
 from spotlab.reconstruction.identification.link_ranges import (
     agreeing_labels,
@@ -411,7 +412,11 @@ def _segment_choice(
     table = table[(table >= 0).sum(axis=1) == (table >= 0).sum(axis=1).max()]
     if refs and ref_rows is not None:
         if (ref_rows >= 0).any():
-            table = table[~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)]
+            markers = np.asarray(seg.markers, dtype=np.intp)
+            table = table[
+                ~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)
+                & ~turned_over(markers, refs, points, table, ref_rows)
+            ]
             if table.shape[0] == 0:
                 return None
         else:
