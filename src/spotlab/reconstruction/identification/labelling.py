@@ -379,8 +379,7 @@ def _segment_labels(
 ) -> tuple[tuple[float, IntArray] | None, IntArray]:
     """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None;
     with the free points it was chosen among (none when all its markers have points).
-    ``link_rounds``: tries the identities of a flat cluster whose references are not
-    labelled (:mod:`.identity_trial`)."""
+    ``link_rounds``: for the trial of a flat cluster's identities (:mod:`.identity_trial`)."""
     seg = model.segments[s]
     fixed = point_of[list(seg.markers)]
     free = np.zeros(0, dtype=np.intp)
