@@ -7,7 +7,8 @@ Prints one JSON object per trial file, then a summary. For every C3D and TRC fil
    frames, not a model output), less the points a program computed from others
    (:func:`computed_points`, from the file's own trajectories: a copy of a point listed
    before plus an offset, an affine combination of two, points rigid to 0.5 mm with two
-   others or to 0.1 mm with one) and the pairs closer than passive markers can sit
+   others or to 0.1 mm with one, points fixed in a scaled frame of three) and the pairs
+   closer than passive markers can sit
    (:func:`crowded_points`: within 10 mm in 5 % of the frames; active LEDs), each
    printed in a ``"left_out"`` line, over the frames where at least 80 % of them are
    seen;
@@ -153,7 +154,11 @@ def computed_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
        ``PELA``..., A.R.T. 6-DOF limbs);
     3. of the rest, in the file's order, a point rigid to ``EXACT_MM`` with one listed
        before it (a point at a fixed offset in a segment's frame: Motion Analysis
-       ``VLTO#2``, 20.0 mm from ``L.TO``).
+       ``VLTO#2``, 20.0 mm from ``L.TO``);
+    4. of the rest, in the file's order, a point whose coordinates in the frame of three
+       listed before it, in proportion to the distance of two of them, hold to
+       ``EXACT_MM`` (:func:`_framed`: Motion Analysis ``VPEL``, ``VRHI``, ``VLHI``, in
+       the pelvis's frame scaled by the ASIS distance).
 
     Parameters
     ----------
@@ -193,7 +198,70 @@ def computed_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
         first = next((j for j in rest[:n] if j not in out and spread[i, j] < EXACT_MM), None)
         if first is not None:
             out[int(i)] = f"rigid with {labels[first]} ({spread[i, first]:.2f} mm)"
+    rest = [i for i in rest if i not in out]
+    for n, i in enumerate(rest):
+        why = _framed(X, i, [j for j in rest[:n] if j not in out], labels)
+        if why:
+            out[int(i)] = why
     return dict(sorted(out.items()))
+
+
+def _framed(X: np.ndarray, i: int, before: list[int], labels: Sequence[str]) -> str | None:
+    """Why point ``i`` sits still in the frame of three points ``before`` it, scaled by
+    the distance of the first two, or None.
+
+    The frame of ``(a, b, c)``: origin ``a``, first axis toward ``b``, third normal to
+    the plane of the three; a joint centre placed in a pelvis's frame at offsets in
+    proportion to the distance of the two ASIS markers (Motion Analysis ``VPEL``,
+    ``VRHI``, ``VLHI``) keeps its coordinates divided by ``|b - a|`` to the file's
+    precision (``EXACT_MM`` RMS, scaled back by the mean distance). Its distances to
+    ``a`` and ``b`` in proportion to ``|b - a|`` are constant too: the pairs that meet
+    that first are the only ones tried with each ``c``.
+
+    ``X`` (F, M, 3): positions (mm), NaN where missing.
+    """
+    if len(before) < 3:
+        return None
+    ref = np.array(before, dtype=int)
+    P = X[:, ref]  # (F, J, 3)
+    to_i = np.linalg.norm(X[:, i, None] - P, axis=2)  # (F, J)
+    base = np.linalg.norm(P[:, :, None] - P[:, None], axis=3)  # (F, J, J)
+    np.einsum("fjj->fj", base)[:] = np.nan
+    pairs = _steady((to_i[:, :, None] / base)[..., None], base)
+    pairs &= pairs.T  # |x_i - a| and |x_i - b| both in proportion to |b - a|
+    for a, b in zip(*np.nonzero(pairs), strict=True):
+        o, n = P[:, a], base[:, a, b]
+        e1 = (P[:, b] - o) / n[:, None]
+        d = X[:, i] - o
+        for c in range(len(ref)):
+            if c in (a, b):
+                continue
+            e3 = np.cross(e1, P[:, c] - o)
+            e3 /= np.linalg.norm(e3, axis=1, keepdims=True)
+            e2 = np.cross(e3, e1)
+            local = np.stack([(d * e).sum(axis=1) for e in (e1, e2, e3)], axis=1) / n[:, None]
+            if _steady(local[:, None], n[:, None])[0]:
+                return (
+                    f"fixed in the frame of {labels[ref[a]]}, {labels[ref[b]]}, "
+                    f"{labels[ref[c]]} scaled by {labels[ref[a]]}-{labels[ref[b]]}"
+                )
+    return None
+
+
+def _steady(ratio: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Where quantities in proportion to a distance stay constant to ``EXACT_MM`` RMS
+    once scaled back by the mean distance, over at least 20 frames.
+
+    ``ratio`` (F, ..., K): K quantities over the distance; ``scale`` (F, ...): the
+    distance (mm); NaN where missing. Returns bool, shape ``scale.shape[1:]``.
+    """
+    seen = np.isfinite(ratio).all(axis=-1) & np.isfinite(scale)
+    count = np.maximum(seen.sum(axis=0), 1)
+    rz = np.where(seen[..., None], ratio, 0.0)
+    mean = rz.sum(axis=0) / count[..., None]
+    var = (np.where(seen[..., None], ratio - mean, 0.0) ** 2).sum(axis=(0, -1)) / count
+    size = np.where(seen, scale, 0.0).sum(axis=0) / count
+    return np.asarray((seen.sum(axis=0) >= 20) & (np.sqrt(var) * size < EXACT_MM))
 
 
 def crowded_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
