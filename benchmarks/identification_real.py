@@ -7,8 +7,11 @@ Prints one JSON object per trial file, then a summary. For every C3D and TRC fil
    frames, not a model output), less the points a program computed from others
    (:func:`computed_points`, from the file's own trajectories: a copy of a point listed
    before plus an offset, an affine combination of two, points rigid to 0.5 mm with two
-   others or to 0.1 mm with one; printed as a ``"left_out"`` line), over the frames
-   where at least 80 % of them are seen;
+   others or to 0.1 mm with one, points fixed in a scaled frame of three) and the pairs
+   closer than passive markers can sit
+   (:func:`crowded_points`: within 10 mm in 5 % of the frames; active LEDs), each
+   printed in a ``"left_out"`` line, over the frames where at least 80 % of them are
+   seen;
 2. a marker model learnt with :meth:`MarkerModel.infer` **with its defaults** from the
    first half of those frames (``--learn 0.5``);
 3. the whole trial placed in the volume of the 8-camera reference ring rig and rendered
@@ -68,6 +71,10 @@ from spotlab.reconstruction.identification.spreads import distance_range
 from spotlab.testing.trial_scene import trial_scene
 
 MIN_MARKERS, MIN_FRAMES, MAX_TOLERANCE_MM, COMPUTED_MM = 6, 100, 40.0, 0.5
+#: Passive markers' centres cannot come closer than their diameter (mm; a gait marker is
+#: 9.5-25 mm across): a pair closer than this in ``CROWDED_SHARE`` of the frames both are
+#: seen in or more is not a pair of passive markers (active LEDs, told apart by hardware).
+CROWDED_MM, CROWDED_SHARE = 10.0, 0.05
 #: A relation with one or two others holds to this (mm) if computed: the file's precision.
 EXACT_MM = 0.1
 #: Only points that move this much (RMS about their mean position, mm) are judged.
@@ -77,7 +84,7 @@ MOVING_MM = 10.0
 def trial_data(path: Path) -> tuple[tuple[str, ...], np.ndarray, float, dict[str, str]]:
     """Labels, trajectories (F, M, 3) over the frames where 80 % of the markers are
     seen (first to last such frame), the frame rate, and the points left out as computed
-    (label: why); ValueError if unsuitable."""
+    or crowded (label: why); ValueError if unsuitable."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         trial = read_trial(path)
@@ -90,8 +97,13 @@ def trial_data(path: Path) -> tuple[tuple[str, ...], np.ndarray, float, dict[str
     measured = np.array([m not in computed for m in range(len(labels))], dtype=bool)
     labels = tuple(name for name, keep in zip(labels, measured, strict=True) if keep)
     X = X[:, measured]
+    crowded = crowded_points(X, labels)
+    left_out |= {labels[m]: why for m, why in crowded.items()}
+    apart = np.array([m not in crowded for m in range(len(labels))], dtype=bool)
+    labels = tuple(name for name, keep in zip(labels, apart, strict=True) if keep)
+    X = X[:, apart]
     if len(labels) < MIN_MARKERS:
-        raise ValueError(f"{len(labels)} labelled markers ({len(left_out)} computed ones left out)")
+        raise ValueError(f"{len(labels)} labelled markers ({len(left_out)} points left out)")
     seen = np.isfinite(X).all(axis=2).mean(axis=1) >= 0.8
     if seen.sum() < MIN_FRAMES:
         raise ValueError(f"{int(seen.sum())} frames with most markers seen")
@@ -142,7 +154,11 @@ def computed_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
        ``PELA``..., A.R.T. 6-DOF limbs);
     3. of the rest, in the file's order, a point rigid to ``EXACT_MM`` with one listed
        before it (a point at a fixed offset in a segment's frame: Motion Analysis
-       ``VLTO#2``, 20.0 mm from ``L.TO``).
+       ``VLTO#2``, 20.0 mm from ``L.TO``);
+    4. of the rest, in the file's order, a point whose coordinates in the frame of three
+       listed before it, in proportion to the distance of two of them, hold to
+       ``EXACT_MM`` (:func:`_framed`: Motion Analysis ``VPEL``, ``VRHI``, ``VLHI``, in
+       the pelvis's frame scaled by the ASIS distance).
 
     Parameters
     ----------
@@ -182,7 +198,106 @@ def computed_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
         first = next((j for j in rest[:n] if j not in out and spread[i, j] < EXACT_MM), None)
         if first is not None:
             out[int(i)] = f"rigid with {labels[first]} ({spread[i, first]:.2f} mm)"
+    rest = [i for i in rest if i not in out]
+    for n, i in enumerate(rest):
+        why = _framed(X, i, [j for j in rest[:n] if j not in out], labels)
+        if why:
+            out[int(i)] = why
     return dict(sorted(out.items()))
+
+
+def _framed(X: np.ndarray, i: int, before: list[int], labels: Sequence[str]) -> str | None:
+    """Why point ``i`` sits still in the frame of three points ``before`` it, scaled by
+    the distance of the first two, or None.
+
+    The frame of ``(a, b, c)``: origin ``a``, first axis toward ``b``, third normal to
+    the plane of the three; a joint centre placed in a pelvis's frame at offsets in
+    proportion to the distance of the two ASIS markers (Motion Analysis ``VPEL``,
+    ``VRHI``, ``VLHI``) keeps its coordinates divided by ``|b - a|`` to the file's
+    precision (``EXACT_MM`` RMS, scaled back by the mean distance). Its distances to
+    ``a`` and ``b`` in proportion to ``|b - a|`` are constant too: the pairs that meet
+    that first are the only ones tried with each ``c``.
+
+    ``X`` (F, M, 3): positions (mm), NaN where missing.
+    """
+    if len(before) < 3:
+        return None
+    ref = np.array(before, dtype=int)
+    P = X[:, ref]  # (F, J, 3)
+    to_i = np.linalg.norm(X[:, i, None] - P, axis=2)  # (F, J)
+    base = np.linalg.norm(P[:, :, None] - P[:, None], axis=3)  # (F, J, J)
+    np.einsum("fjj->fj", base)[:] = np.nan
+    pairs = _steady((to_i[:, :, None] / base)[..., None], base)
+    pairs &= pairs.T  # |x_i - a| and |x_i - b| both in proportion to |b - a|
+    for a, b in zip(*np.nonzero(pairs), strict=True):
+        o, n = P[:, a], base[:, a, b]
+        e1 = (P[:, b] - o) / n[:, None]
+        d = X[:, i] - o
+        for c in range(len(ref)):
+            if c in (a, b):
+                continue
+            e3 = np.cross(e1, P[:, c] - o)
+            e3 /= np.linalg.norm(e3, axis=1, keepdims=True)
+            e2 = np.cross(e3, e1)
+            local = np.stack([(d * e).sum(axis=1) for e in (e1, e2, e3)], axis=1) / n[:, None]
+            if _steady(local[:, None], n[:, None])[0]:
+                return (
+                    f"fixed in the frame of {labels[ref[a]]}, {labels[ref[b]]}, "
+                    f"{labels[ref[c]]} scaled by {labels[ref[a]]}-{labels[ref[b]]}"
+                )
+    return None
+
+
+def _steady(ratio: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Where quantities in proportion to a distance stay constant to ``EXACT_MM`` RMS
+    once scaled back by the mean distance, over at least 20 frames.
+
+    ``ratio`` (F, ..., K): K quantities over the distance; ``scale`` (F, ...): the
+    distance (mm); NaN where missing. Returns bool, shape ``scale.shape[1:]``.
+    """
+    seen = np.isfinite(ratio).all(axis=-1) & np.isfinite(scale)
+    count = np.maximum(seen.sum(axis=0), 1)
+    rz = np.where(seen[..., None], ratio, 0.0)
+    mean = rz.sum(axis=0) / count[..., None]
+    var = (np.where(seen[..., None], ratio - mean, 0.0) ** 2).sum(axis=(0, -1)) / count
+    size = np.where(seen, scale, 0.0).sum(axis=0) / count
+    return np.asarray((seen.sum(axis=0) >= 20) & (np.sqrt(var) * size < EXACT_MM))
+
+
+def crowded_points(X: np.ndarray, labels: Sequence[str]) -> dict[int, str]:
+    """Both markers of each pair that sits closer than passive markers can.
+
+    Judged among the markers left once computed points are out (a computed point may
+    sit on its marker). Two passive spheres' centres stay a diameter apart; cameras see
+    two LEDs of an active system (Codamotion's sacral wand, 2.9 mm apart at the closest)
+    as one blob, and only the active system's hardware tells them apart. A pair closer
+    than ``CROWDED_MM`` in ``CROWDED_SHARE`` or more of the frames both are seen in is
+    left out (a wrist brushing the pelvis for a moment is not).
+
+    Parameters
+    ----------
+    X : ndarray, shape (F, M, 3)
+        Trajectories (mm), NaN where missing.
+    labels : sequence of str, length M
+
+    Returns
+    -------
+    dict of int to str
+        Index of each marker left out, and why.
+    """
+    out: dict[int, str] = {}
+    M = X.shape[1]
+    for i in range(M):
+        d = np.linalg.norm(X[:, i, None] - X[:, i + 1 :], axis=2)  # (F, M - i - 1)
+        both = np.isfinite(d)
+        close = ((d < CROWDED_MM) & both).sum(axis=0) / np.maximum(both.sum(axis=0), 1)
+        for j in np.flatnonzero(close >= CROWDED_SHARE) + i + 1:
+            share = f"{100 * close[j - i - 1]:.0f} % of the frames"
+            for a, b in ((i, j), (j, i)):
+                out.setdefault(
+                    int(a), f"within {CROWDED_MM:.0f} mm of {labels[b]} in {share}: not passive"
+                )
+    return out
 
 
 def _derived(

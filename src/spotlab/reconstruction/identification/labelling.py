@@ -28,7 +28,9 @@ from scipy.optimize import linear_sum_assignment
 
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction._rigid_identity import choose_identity
+from spotlab.reconstruction.identification.candidate_sides import turned_over
 from spotlab.reconstruction.identification.handedness import Reference, wrong_way_round
+from spotlab.reconstruction.identification.identity_trial import LinkRounds, Trial, trial_of
 from spotlab.reconstruction.identification.link_ranges import (
     agreeing_labels,
     fit_counts,
@@ -193,6 +195,13 @@ def assign_labels(
     out = labels.copy()
     point_of = np.full(len(model.labels), -1, dtype=np.intp)
     point_of[out[out >= 0]] = np.flatnonzero(out >= 0)
+    can = np.ones(K, dtype=bool) if linkable is None else linkable
+
+    def link_rounds(lab: IntArray, where: IntArray) -> None:
+        for _ in range(3):  # labels found by links constrain the next markers
+            if not _linked_labels(model, points, lab, where, tol_mm, min_links, can):
+                break
+
     pending = list(range(len(model.segments)))
     # A segment's best assignment depends only on its own markers' points and on the
     # free points near it: it is kept until another segment takes one of those.
@@ -202,7 +211,16 @@ def assign_labels(
         for s in pending:
             if s not in known:
                 known[s] = _segment_labels(
-                    model, s, points, out, point_of, tol_mm, margin_mm, near_mm, anchors
+                    model,
+                    s,
+                    points,
+                    out,
+                    point_of,
+                    tol_mm,
+                    margin_mm,
+                    near_mm,
+                    anchors,
+                    link_rounds,
                 )
             found = known[s][0]
             if found is None:
@@ -224,10 +242,7 @@ def assign_labels(
         for other in pending:
             if other in known and np.isin(known[other][1], taken).any():
                 del known[other]
-    can = np.ones(K, dtype=bool) if linkable is None else linkable
-    for _ in range(3):  # labels found by links constrain the next markers
-        if not _linked_labels(model, points, out, point_of, tol_mm, min_links, can):
-            break
+    link_rounds(out, point_of)
     if _exchanged_labels(model, points, out, point_of, tol_mm, min_links, can):
         _linked_labels(model, points, out, point_of, tol_mm, min_links, can)
     return out
@@ -361,9 +376,11 @@ def _segment_labels(
     margin_mm: float,
     near_mm: float,
     anchors: FloatArray | None,
+    link_rounds: LinkRounds | None = None,
 ) -> tuple[tuple[float, IntArray] | None, IntArray]:
     """The best new assignment ``(rms, points per marker)`` of segment ``s``, or None;
-    with the free points it was chosen among (none when all its markers have points)."""
+    with the free points it was chosen among (none when all its markers have points).
+    ``link_rounds``: for the trial of a flat cluster's identities (:mod:`.identity_trial`)."""
     seg = model.segments[s]
     fixed = point_of[list(seg.markers)]
     free = np.zeros(0, dtype=np.intp)
@@ -374,7 +391,9 @@ def _segment_labels(
         free = free[np.linalg.norm(points[free] - anchors[s], axis=1) < near_mm]
     refs = model.references_by_segment.get(s, [])
     ref_rows = point_of[[r.marker for r in refs]] if refs else np.zeros(0, dtype=np.intp)
-    return _segment_choice(seg, points, fixed, free, tol_mm, margin_mm, refs, ref_rows), free
+    trial = trial_of(model, s, points, labels, point_of, link_rounds)
+    choice = _segment_choice(seg, points, fixed, free, tol_mm, margin_mm, refs, ref_rows, trial)
+    return choice, free
 
 
 def _segment_choice(
@@ -386,10 +405,13 @@ def _segment_choice(
     margin_mm: float,
     refs: list[Reference] | None = None,
     ref_rows: IntArray | None = None,
+    trial: Trial | None = None,
 ) -> tuple[float, IntArray] | None:
     """:func:`_segment_labels` among the points ``free``, with ``fixed`` (point per marker
     or -1); candidate identities the segment's references ``refs`` (their points
-    ``ref_rows``, -1 where unlabelled) refuse are left out (:func:`.wrong_way_round`)."""
+    ``ref_rows``, -1 where unlabelled) refuse are left out (:func:`.wrong_way_round`).
+    With none of them labelled, ``trial`` leaves out the candidates the references the
+    links then label refuse (:func:`.identity_trial.unrefused`)."""
     if free.size == 0:
         return None
     predicted = _predicted(seg, points, fixed)
@@ -411,13 +433,21 @@ def _segment_choice(
     table = table[(table >= 0).sum(axis=1) == (table >= 0).sum(axis=1).max()]
     if refs and ref_rows is not None:
         if (ref_rows >= 0).any():
-            table = table[~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)]
+            markers = np.asarray(seg.markers, dtype=np.intp)
+            table = table[
+                ~wrong_way_round(seg.coordinates, refs, points, table, ref_rows)
+                & ~turned_over(markers, refs, points, table, ref_rows)
+            ]
             if table.shape[0] == 0:
                 return None
         else:
             # A flat cluster none of whose references is labelled yet: its mirror image
             # fits it almost as well, so only a clear lead is taken (a wrong identity
-            # taken now would be reported until the references show it).
+            # taken now would be reported until the references show it), among the
+            # identities the references the links would label do not refuse.
+            table = table if trial is None else trial(table)
+            if table.shape[0] == 0:
+                return None
             margin_mm = max(margin_mm, tol_mm)
     choice = choose_identity(seg.coordinates, points, candidates=table.tolist())
     # Woltring's caveat: the smallest RMS is a criterion, not a proof; ambiguous ones wait.
