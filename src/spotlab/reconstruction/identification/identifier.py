@@ -34,6 +34,7 @@ from spotlab.reconstruction.identification.handedness import misplaced_segments
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
 from spotlab.reconstruction.identification.tracking import Tracks, associate
+from spotlab.reconstruction.identification.twin_clusters import refuted_twins, twin_segments
 
 __all__ = ["FLOODED", "NO_BLOBS", "UNUSABLE", "IdentifiedFrame", "Identifier"]
 
@@ -150,6 +151,7 @@ class Identifier:
         self._segment_of = model.segment_of
         _ = model.partners, model.directed  # the model's lookup tables, built before frames
         self._points = np.full((len(model.labels), 3), np.nan)  # labelled points (checks)
+        self._twins = twin_segments(model, tol_mm)
         self._offered = np.zeros(C)
         self._confirmed = np.zeros(C)
         self._frames = 0
@@ -339,9 +341,22 @@ class Identifier:
                 tracks.age[new] = 0
                 tracks.label[stale] = -1
                 changed = True
+        if self._twins:  # refills the points buffer: changed again only if it drops
+            changed = self._check_twins()
         if self.model.sides[0].size:
             self._check_handedness(refill=changed)
         self._update_anchors()
+
+    def _check_twins(self) -> bool:
+        """Drop the labels of twin clusters a marker off them refutes by its links
+        (:func:`.twin_clusters.refuted_twins`): found again next frame. True if any was."""
+        tracks, points = self.tracks, self._points
+        lab = (tracks.label >= 0) & (tracks.missed == 0)
+        points.fill(np.nan)
+        points[tracks.label[lab]] = tracks.position[lab]
+        free = tracks.position[(tracks.missed == 0) & (tracks.label < 0) & ~tracks.ghost]
+        drop = refuted_twins(self.model, self._twins, points, free, self.tol_mm)
+        return self._unlabel(drop)
 
     def _check_handedness(self, refill: bool) -> None:
         """Drop the labels of flat clusters whose references say they are the wrong way
@@ -353,11 +368,15 @@ class Identifier:
             lab = (tracks.label >= 0) & (tracks.missed == 0)
             points.fill(np.nan)
             points[tracks.label[lab]] = tracks.position[lab]
-        drop = misplaced_segments(self.model.segment_arrays, self.model.sides, points)
+        self._unlabel(misplaced_segments(self.model.segment_arrays, self.model.sides, points))
+
+    def _unlabel(self, drop: NDArray[np.bool_]) -> bool:
+        """Unlabel the seen tracks of the markers ``drop`` (M,); True if any was."""
         if drop.any():
-            bad = np.isin(tracks.label, np.flatnonzero(drop)) & (tracks.missed == 0)
-            tracks.label[bad] = -1
-            tracks.age[bad] = 0
+            bad = np.isin(self.tracks.label, np.flatnonzero(drop)) & (self.tracks.missed == 0)
+            self.tracks.label[bad] = -1
+            self.tracks.age[bad] = 0
+        return bool(drop.any())
 
     def _update_anchors(self) -> None:
         tracks = self.tracks
