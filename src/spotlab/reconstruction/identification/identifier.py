@@ -223,6 +223,9 @@ class Identifier:
         # its label is earned again, from the cluster fit or the links (checks of the
         # track by far partners with wide link ranges would let a wrong one pass).
         back = long_gap & (tracks.missed == 0) & (tracks.label >= 0)
+        # A point two rays make, one of whose blobs another point explains, may be where no
+        # marker is (:mod:`.crossed_rays`): no evidence for the label tracking carried.
+        back |= crossed & (tracks.label >= 0)
         if self.floor_mm is not None:
             # A marker on the floor and its reflection are a few mm apart and their
             # tracks may trade blobs: whether a track is a reflection is where it is now.
