@@ -6,7 +6,9 @@ no marker is (``bmc/Gait.c3d`` seed 2: the ankle's blob in one camera and the ot
 ankle marker's in another, a point 51 mm beside the hidden heel, that the heel's links
 took). A third camera refutes such a point; with two, what gives it away is a blob that
 another point of the frame explains as well: it lies on that point's projection. Such a
-point may be a marker still, but it is no evidence for a label by distance ranges alone.
+point may be a marker still, but it is no evidence for a label by distance ranges alone,
+nor for one tracking carried onto it: the identifier drops that label, to be earned again
+(``read_NOTworking2``'s wrist labels carried onto points 19-109 mm from any marker).
 """
 
 from __future__ import annotations

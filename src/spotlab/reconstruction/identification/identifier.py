@@ -29,6 +29,7 @@ from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import match_blobs
 from spotlab.reconstruction.identification.crossed_rays import crossed_rays
+from spotlab.reconstruction.identification.duplicate_tracks import duplicate_tracks
 from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 from spotlab.reconstruction.identification.handedness import misplaced_segments
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
@@ -108,6 +109,10 @@ class Identifier:
         More blobs than this in one camera and frame leave the camera out of the frame.
     check_frames : int
         Window of the calibration check (frames); 0 turns it off.
+    apart_mm : float
+        Two points closer than this (mm) are one marker: an unlabelled track that close
+        to a labelled one is deleted (:func:`.duplicate_tracks.duplicate_tracks`). Less
+        than the smallest passive marker's diameter; 0 turns it off.
 
     Raises
     ------
@@ -132,6 +137,7 @@ class Identifier:
         margin_mm: float = 1.0,
         max_blobs: int = 400,
         check_frames: int = 150,
+        apart_mm: float = 4.0,
     ) -> None:
         if not isinstance(rig, Rig):
             raise ReconstructionError(f"rig must be a spotlab Rig, got {type(rig).__name__}")
@@ -145,6 +151,7 @@ class Identifier:
         self.keep_label_frames = keep_label_frames
         self.tol_mm, self.rms_mm, self.margin_mm = tol_mm, rms_mm, margin_mm
         self.max_blobs, self.check_frames = max_blobs, check_frames
+        self.apart_mm = apart_mm
         self.tracks = Tracks()
         C, S = len(rig), len(model.segments)
         self._anchors = np.full((S, 3), np.nan)
@@ -216,6 +223,9 @@ class Identifier:
         # its label is earned again, from the cluster fit or the links (checks of the
         # track by far partners with wide link ranges would let a wrong one pass).
         back = long_gap & (tracks.missed == 0) & (tracks.label >= 0)
+        # A point two rays make, one of whose blobs another point explains, may be where no
+        # marker is (:mod:`.crossed_rays`): no evidence for the label tracking carried.
+        back |= crossed & (tracks.label >= 0)
         if self.floor_mm is not None:
             # A marker on the floor and its reflection are a few mm apart and their
             # tracks may trade blobs: whether a track is a reflection is where it is now.
@@ -226,6 +236,10 @@ class Identifier:
         self._new_tracks(xy, camera, usable & ~used & ~near, used)
         self._check_calibration(camera, usable, used)
         alive = tracks.missed <= self.bridge_frames
+        # a copy of a labelled marker's point (its blobs split between two tracks) goes
+        alive &= ~duplicate_tracks(
+            tracks.position, (tracks.missed == 0) & ~tracks.ghost, tracks.label, self.apart_mm
+        )
         tracks.keep(alive)
         # points of two rays another point's blob may have made take no label by links
         self._crossed = np.concatenate([crossed, np.zeros(alive.size - crossed.size, bool)])[alive]
