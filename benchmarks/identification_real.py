@@ -66,6 +66,7 @@ from spotlab.io.c3d_parameters import C3DParameters
 from spotlab.io.trial import Trial
 from spotlab.processing.identification_passes import PassResult, identify_pass, join_passes
 from spotlab.processing.pass_runs import jump_mm
+from spotlab.processing.track_bridges import TrackLog
 from spotlab.reconstruction.identification import Identifier, MarkerModel
 from spotlab.reconstruction.identification.spreads import distance_range
 from spotlab.testing.trial_scene import trial_scene
@@ -375,16 +376,19 @@ def run(
     identify = Identifier(scene.rig, model, **IDENTIFIER)
     points = np.full((F - h, M, 3), np.nan)
     start, cpu_start = time.perf_counter(), time.process_time()
-    for k in range(F - h):
-        points[k] = identify(scene.frames[h + k]).points
+    results = [identify(scene.frames[h + k]) for k in range(F - h)]
     took = time.perf_counter() - start
     cpu_took = time.process_time() - cpu_start
+    tracks = TrackLog.empty(F - h, M)
+    for k, result in enumerate(results):
+        points[k] = result.points
+        tracks.add(k, result)
     frames = [(scene.frames[h + k], None) for k in range(F - h)]
     numbers = np.arange(F - h)
     backward = identify_pass(
         scene.rig, model, frames, np.ones(F - h, bool), numbers, range(F - h - 1, -1, -1)
     )
-    forward = PassResult(points, np.full((F - h, M), np.nan))
+    forward = PassResult(points, np.full((F - h, M), np.nan), tracks=tracks)
     joined, counts = join_passes(forward, backward, jump_mm(model))
     # the truth, only now
     truth = scene.markers_mm[h:]

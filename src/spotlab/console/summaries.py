@@ -52,6 +52,11 @@ def print_blob_summary(summary: dict[str, Any], outputs: list[Path]) -> None:
             f"  backward pass      filled {summary['filled_backward']} marker samples, "
             f"dropped {summary['label_conflicts']} where the passes disagreed"
         )
+    if summary.get("bridged"):
+        print(
+            f"  trajectories       filled {summary['bridged']} marker samples between "
+            "two labels of one unbroken trajectory"
+        )
     print(
         f"  rejected           {summary['ghosts_rejected']} reflection points, "
         f"{summary['unlabelled_per_frame']:g} unlabelled points per frame"

@@ -316,9 +316,10 @@ def identify_recording(
         ``ghosts_rejected`` (reflection points), ``unlabelled_per_frame``,
         ``marker_gaps`` (gaps inside each marker's trajectory, summed),
         ``identification_restarts`` (gaps of more than ``MAX_LOST_FRAMES`` lost frames,
-        after which identification starts afresh), ``filled_backward`` and
-        ``label_conflicts`` (marker-frames the backward pass added, and dropped because
-        the two passes disagreed), and per camera the
+        after which identification starts afresh), ``filled_backward``,
+        ``bridged`` and ``label_conflicts`` (marker-frames the backward pass added, those
+        filled along a trajectory labelled as that marker before and after, and those
+        dropped because the two passes disagreed), and per camera the
         frames it was ``offline``, ``overflow``, ``flooded`` (too many blobs) or had
         ``no_blobs``.
 
@@ -384,6 +385,7 @@ def identify_recording(
         "marker_gaps": _gaps(np.isfinite(points[..., 0])),
         "identification_restarts": restarts,
         "filled_backward": counts.get("filled_backward", 0),
+        "bridged": counts.get("bridged", 0),
         "label_conflicts": counts.get("label_conflicts", 0),
         "camera_frames": {
             name: {

@@ -30,6 +30,7 @@ from spotlab.geometry import Rig
 from spotlab.processing.errors import InputError
 from spotlab.processing.pass_runs import JUMP_MM, jump_mm, refuted_labels
 from spotlab.processing.progress import ProgressSink
+from spotlab.processing.track_bridges import TrackLog, bridge_labels
 from spotlab.reconstruction.identification import (
     FLOODED,
     NO_BLOBS,
@@ -68,6 +69,9 @@ class PassResult:
         Reflection points rejected, points left unlabelled, fresh starts after gaps.
     flooded, no_blobs : ndarray, shape (C,)
         Frames each camera was flagged too full of blobs, or without blobs.
+    tracks : TrackLog or None
+        The pass's trajectories (:mod:`.track_bridges`); None: not recorded, and
+        :func:`join_passes` bridges no gap along them.
     """
 
     points: FloatArray
@@ -77,6 +81,7 @@ class PassResult:
     restarts: int = 0
     flooded: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     no_blobs: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    tracks: TrackLog | None = None
 
 
 def identify_pass(
@@ -116,13 +121,16 @@ def identify_pass(
         np.full((F, M), np.nan),
         flooded=np.zeros(C, np.int64),
         no_blobs=np.zeros(C, np.int64),
+        tracks=TrackLog.empty(F, M),
     )
     identify = Identifier(rig, model)
+    offset = 0  # trajectory numbers of earlier identifiers (restarts)
     last: int | None = None
     for k, f in enumerate(order):
         if not usable[f]:
             continue
         if last is not None and abs(int(frame_no[f]) - last) - 1 > MAX_LOST_FRAMES:
+            offset += identify.tracks.next_ident
             identify = Identifier(rig, model)
             out.restarts += 1
         last = int(frame_no[f])
@@ -136,6 +144,8 @@ def identify_pass(
         out.unlabelled += result.unlabelled
         out.flooded += (result.camera_flags & FLOODED) != 0
         out.no_blobs += (result.camera_flags & NO_BLOBS) != 0
+        if out.tracks is not None:
+            out.tracks.add(f, result, offset)
         if progress is not None and k % 256 == 0:
             progress.update(k, f"{k} of {len(order)} frames")
     return out
@@ -159,7 +169,10 @@ def join_passes(
         ``label_conflicts`` (marker-frames dropped: the passes disagreed now and then, or
         a label filled from the backward pass fell within :data:`AGREE_MM` of another
         label of the frame) and ``systematic_markers`` (markers whose passes disagreed on
-        more than :data:`SYSTEMATIC_SHARE` of their frames: forward labels kept).
+        more than :data:`SYSTEMATIC_SHARE` of their frames: forward labels kept) and
+        ``bridged`` (marker-frames filled along a pass's trajectories,
+        :func:`~spotlab.processing.track_bridges.bridge_labels`, where neither pass
+        labelled them).
     """
     refuted_f = refuted_labels(forward.points, backward.points, AGREE_MM, jump)
     refuted_b = refuted_labels(backward.points, forward.points, AGREE_MM, jump)
@@ -176,6 +189,14 @@ def join_passes(
     residual = np.where(fill, backward.residual_px, forward.residual_px)
     drop = disagree | (_doubled(points) & fill)
     points[drop] = np.nan
+    closed = drop | refuted_f | refuted_b | systematic[None, :]
+    bridged = np.zeros(closed.shape, dtype=bool)
+    for one in (forward, backward):
+        if one.tracks is not None:
+            bridged |= bridge_labels(points, residual, one.points, one.tracks, closed, AGREE_MM)
+    doubled = _doubled(points) & bridged
+    points[doubled] = np.nan
+    bridged &= ~doubled
     residual[~np.isfinite(points[..., 0])] = np.nan
     joined = PassResult(
         points,
@@ -190,6 +211,7 @@ def join_passes(
         "filled_backward": int((fill & ~drop).sum()),
         "label_conflicts": int(drop.sum()),
         "systematic_markers": int(systematic.sum()),
+        "bridged": int(bridged.sum()),
     }
     return joined, counts
 

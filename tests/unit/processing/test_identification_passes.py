@@ -43,7 +43,12 @@ def test_join_fills_agrees_and_drops() -> None:
     assert np.isnan(got[7, 3]).all()
     kept = np.arange(F) != 7
     assert np.array_equal(got[kept, 3], truth[kept, 3])
-    assert counts == {"filled_backward": 1, "label_conflicts": 2, "systematic_markers": 1}
+    assert counts == {
+        "filled_backward": 1,
+        "label_conflicts": 2,
+        "systematic_markers": 1,
+        "bridged": 0,
+    }
     assert np.isnan(joined.residual_px[3, 0]) and joined.residual_px[0, 0] == 0.1
 
 

@@ -10,13 +10,13 @@ from spotlab.reconstruction.identification.blobs import BlobFrame
 from spotlab.reconstruction.identification.correspondence import Correspondence, match_blobs
 from spotlab.reconstruction.identification.fit import ModelFit, model_fit
 from spotlab.reconstruction.identification.geometry import RigGeometry
-from spotlab.reconstruction.identification.identifier import (
+from spotlab.reconstruction.identification.identified_frame import (
     FLOODED,
     NO_BLOBS,
     UNUSABLE,
     IdentifiedFrame,
-    Identifier,
 )
+from spotlab.reconstruction.identification.identifier import Identifier
 from spotlab.reconstruction.identification.model import Link, MarkerModel, Segment
 
 __all__ = [

@@ -18,7 +18,6 @@ One :class:`Identifier` per recording or live stream. Per frame:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -32,49 +31,21 @@ from spotlab.reconstruction.identification.crossed_rays import crossed_rays
 from spotlab.reconstruction.identification.duplicate_tracks import duplicate_tracks
 from spotlab.reconstruction.identification.geometry import RigGeometry, camera_slots
 from spotlab.reconstruction.identification.handedness import misplaced_segments
+from spotlab.reconstruction.identification.identified_frame import (
+    FLOODED,
+    NO_BLOBS,
+    UNUSABLE,
+    IdentifiedFrame,
+)
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
 from spotlab.reconstruction.identification.tracking import Tracks, associate
 from spotlab.reconstruction.identification.twin_clusters import refuted_twins, twin_segments
 
-__all__ = ["FLOODED", "NO_BLOBS", "UNUSABLE", "IdentifiedFrame", "Identifier"]
+__all__ = ["Identifier"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-
-#: Camera flags of an :class:`IdentifiedFrame`.
-FLOODED = 1  # more blobs than max_blobs: left out of the frame
-UNUSABLE = 2  # flagged by the caller (offline, overflow)
-NO_BLOBS = 4  # no blob at all
-
-
-@dataclass(frozen=True)
-class IdentifiedFrame:
-    """Labelled markers of one frame.
-
-    Attributes
-    ----------
-    points : ndarray, shape (M, 3)
-        Marker positions (mm) in the model's label order; NaN where a marker was not
-        reconstructed (a flagged gap, never a guess).
-    residual_px : ndarray, shape (M,)
-        RMS ray error of each marker (undistorted px), NaN where missing.
-    n_cameras : ndarray of int, shape (M,)
-        Cameras whose rays made each marker.
-    unlabelled : int
-        Points reconstructed but given no label (not reported).
-    ghosts : int
-        Points rejected as reflections (below the floor).
-    camera_flags : ndarray of int, shape (C,)
-        ``FLOODED``, ``UNUSABLE``, ``NO_BLOBS`` bits per camera.
-    """
-
-    points: FloatArray
-    residual_px: FloatArray
-    n_cameras: IntArray
-    unlabelled: int
-    ghosts: int
-    camera_flags: IntArray
 
 
 class Identifier:
@@ -222,6 +193,8 @@ class Identifier:
         # After more than a short gap a track may have caught another marker's blobs:
         # its label is earned again, from the cluster fit or the links (checks of the
         # track by far partners with wide link ranges would let a wrong one pass).
+        # Those are where a trajectory may have passed to another marker: a new number.
+        tracks.renew((long_gap & (tracks.missed == 0)) | crossed)
         back = long_gap & (tracks.missed == 0) & (tracks.label >= 0)
         # A point two rays make, one of whose blobs another point explains, may be where no
         # marker is (:mod:`.crossed_rays`): no evidence for the label tracking carried.
@@ -446,13 +419,20 @@ class Identifier:
         points[tracks.label[lab]] = tracks.position[lab]
         residual[tracks.label[lab]] = tracks.residual[lab]
         n_cam[tracks.label[lab]] = tracks.views[lab]
+        trajectory = np.full(M, -1, dtype=np.intp)
+        trajectory[tracks.label[lab]] = tracks.ident[lab]
+        loose = np.flatnonzero(seen & (tracks.label < 0) & ~tracks.ghost)
         return IdentifiedFrame(
             points=points,
             residual_px=residual,
             n_cameras=n_cam,
-            unlabelled=int((seen & (tracks.label < 0) & ~tracks.ghost).sum()),
+            unlabelled=int(loose.size),
             ghosts=int((seen & tracks.ghost).sum()),
             camera_flags=flags.astype(np.intp),
+            trajectory=trajectory,
+            loose_points=tracks.position[loose],
+            loose_trajectory=tracks.ident[loose],
+            loose_residual_px=tracks.residual[loose],
         )
 
 

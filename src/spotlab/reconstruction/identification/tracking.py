@@ -47,6 +47,12 @@ class Tracks:
         RMS ray error of the last measurement (undistorted px).
     views : ndarray of int, shape (K,)
         Cameras of the last measurement.
+    ident : ndarray of int, shape (K,)
+        Trajectory number: given when a track starts, and anew where the identifier
+        doubts the track is still on the same marker (:meth:`renew`). Points with one
+        number are one marker's unbroken trajectory, whatever labels they had.
+    next_ident : int
+        The number the next trajectory gets.
     """
 
     position: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -57,6 +63,8 @@ class Tracks:
     age: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     residual: FloatArray = field(default_factory=lambda: np.zeros(0))
     views: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    ident: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    next_ident: int = 0
 
     def __len__(self) -> int:
         return int(self.label.size)
@@ -90,6 +98,18 @@ class Tracks:
         self.label = np.concatenate([self.label, np.full(n, -1, dtype=np.intp)])
         self.ghost = np.concatenate([self.ghost, ghost])
         self.age = np.concatenate([self.age, np.zeros(n, dtype=np.intp)])
+        self.ident = np.concatenate([self.ident, self._numbers(n)])
+
+    def renew(self, mask: NDArray[np.bool_]) -> None:
+        """New trajectory numbers for the tracks where ``mask`` is True (K,)."""
+        rows = np.flatnonzero(mask)
+        if rows.size:
+            self.ident[rows] = self._numbers(rows.size)
+
+    def _numbers(self, n: int) -> IntArray:
+        out = np.arange(self.next_ident, self.next_ident + n, dtype=np.intp)
+        self.next_ident += n
+        return out
 
     def keep(self, mask: NDArray[np.bool_]) -> None:
         """Delete the tracks where ``mask`` is False."""
@@ -104,6 +124,7 @@ class Tracks:
             "age",
             "residual",
             "views",
+            "ident",
         ):
             setattr(self, name, getattr(self, name)[mask])
 
