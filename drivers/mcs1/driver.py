@@ -5,7 +5,7 @@ else ``RESET:``) and waits for its banner, moves to the streaming baud rate
 (``COMM``, then ``VER:0`` within 1 s, else reset and try once more), lets the
 family check the device's ``VER:0`` reply, sends the configuration commands
 (every reply checked) and starts the stream. :meth:`recv` decodes what the port
-holds.
+holds (through a :class:`~spotlab.drivers.mcs1.reader.StreamReader`).
 
 While streaming the driver watches for the faults of selspot.md §7 and recovers
 by itself: a port that went away, the device's reset banner, or no valid frame
@@ -44,10 +44,10 @@ from spotlab.drivers.mcs1.commands import (
     Reply,
     encode_command,
     parse_conf,
-    parse_reply,
 )
 from spotlab.drivers.mcs1.contracts import Mcs1Config, Mcs1Decoder
 from spotlab.drivers.mcs1.link import SerialLink
+from spotlab.drivers.mcs1.reader import StreamReader
 from spotlab.drivers.mcs1.session import CommandChannel
 
 #: Seconds between the last ``RESET:`` at the streaming rate and the move to 9600 baud.
@@ -59,14 +59,6 @@ log = logging.getLogger(__name__)
 RETRY_INTERVAL = 0.05
 #: Longest wait for the banner while recovering (s): a returning device answers in ms.
 RECOVERY_RESET_WAIT = 0.5
-#: Silence (no byte at all) after which a streaming device counts as gone (s): a device
-#: at 50 Hz and up sends every 20 ms; a busy host may not read for a few hundred ms.
-SILENCE_S = 0.5
-#: Bytes (at least) that may arrive without a valid frame before the link counts as garbage
-#: (one longest MCS-1 frame).
-MIN_FRAME_WINDOW = 1 << 16
-#: A reply behind data frames is awaited at most this many reply timeouts in all.
-REPLY_BEHIND_DATA = 5
 #: Faults after which the driver tries to recover instead of raising.
 _TRANSIENT = (DeviceTimeout, DeviceDisconnected, ProtocolError)
 
@@ -132,25 +124,11 @@ class Mcs1Driver(Driver):
         self._adopt_pending = bool(self._unasked())
         self._link = SerialLink(self.port, on_rx=self._tap_rx, on_tx=self._tap_tx)
         self._channel = CommandChannel(self._link, reply_timeout, self.stats)
+        self._reader = StreamReader(self._link, reply_timeout, config)
         self._streaming = False
-        self._stash: list[FrameBlock] = []
         self._recovering: str | None = None
         self._reconnect_asked: str | None = None
         self._outage_start = 0.0
-        self._retime(config)
-
-    def _retime(self, config: Mcs1Config) -> None:
-        """Silence and flush thresholds of ``config``'s frame rate and size."""
-        period_s = 1.0 / config.rate_hz
-        self._silence_ns = int(max(SILENCE_S, 20 * period_s) * 1e9)
-        send_s = config.frame_bytes * 10 / config.baud
-        self._idle_flush_ns = int(max(0.05, 3 * send_s) * 1e9)
-        self._last_frame_ns = 0
-        self._last_rx_ns = 0
-        # Bytes read since the last valid frame; more than this many means garbage
-        # (a device at another baud rate), not a host that fell behind.
-        self._rx_since_frame = 0
-        self._garbage_bytes = 2 * max(config.frame_bytes, MIN_FRAME_WINDOW)
 
     # -- settings the user did not give: the device's own (CONF:) ---------------------
     @abstractmethod
@@ -191,7 +169,7 @@ class Mcs1Driver(Driver):
             return
         config, decoder = self._rebuild(self._device_settings(parse_conf(reply.text)))
         self.config, self._decoder = config, decoder
-        self._retime(config)
+        self._reader.retime(config)
         self._adopt_pending = False
 
     @abstractmethod
@@ -285,8 +263,7 @@ class Mcs1Driver(Driver):
         # The stream restarts: seq and frame_no count from 0 again.
         self._decoder.mark_discontinuity()
         self._streaming = True
-        now = time.monotonic_ns()
-        self._last_frame_ns = self._last_rx_ns = now
+        self._reader.started(time.monotonic_ns())
         self._tap_event("started")
 
     def command(self, text: str) -> Reply:
@@ -308,7 +285,7 @@ class Mcs1Driver(Driver):
         if not self._streaming:
             return self._channel.transact(verb, args)
         self._link.write(encode_command(verb, args))
-        return self._await_event_reply(f"{verb}:{args}")
+        return self._reader.await_reply(self._decoder, f"{verb}:{args}")
 
     def _stop(self) -> None:
         if self._recovering is not None:
@@ -319,7 +296,7 @@ class Mcs1Driver(Driver):
         self._streaming = False
         try:
             self._link.write(encode_command("STOP"))
-            self._await_event_reply("STOP:", okay_only=True)
+            self._reader.await_reply(self._decoder, "STOP:", okay_only=True)
             # Leave the device as it powers up (9600 baud, its defaults), where the next
             # program (another driver, `spotlab devices --probe`) finds it.
             self._link.write(encode_command("RESET"))
@@ -341,37 +318,7 @@ class Mcs1Driver(Driver):
     def drain(self) -> list[FrameBlock]:
         """Frames decoded but not yet returned by :meth:`recv` (those that arrived while
         the driver waited for its reply to ``STOP:``), handed over once."""
-        blocks, self._stash = self._stash, []
-        return blocks
-
-    def _await_event_reply(self, command: str, okay_only: bool = False) -> Reply:
-        """Decode frames until the reply's event frame; keep the frames for ``recv``.
-
-        The reply queues behind the data frames already in the device's FIFO: while
-        frames keep arriving the device is alive, so the wait lasts ``reply_timeout``
-        after the last byte (at most :data:`REPLY_BEHIND_DATA` times ``reply_timeout``).
-        """
-        start = time.monotonic()
-        deadline = start + self.reply_timeout
-        latest = start + REPLY_BEHIND_DATA * self.reply_timeout
-        while True:
-            if self._read_and_decode(deadline - time.monotonic(), flush_idle=True) is not None:
-                deadline = min(latest, time.monotonic() + self.reply_timeout)
-            for event in self._decoder.take_events():
-                try:
-                    reply = parse_reply(event.payload)
-                except ProtocolError as exc:
-                    log.warning(
-                        "%s: while waiting for the reply to %s: %s", self.port, command, exc
-                    )
-                    continue
-                reply.raise_for_error(command)
-                if reply.kind == "okay" or not okay_only:
-                    return reply
-            if time.monotonic() >= deadline:
-                raise DeviceTimeout(
-                    f"no reply to {command} from {self.port} within {self.reply_timeout:g} s"
-                )
+        return self._reader.drain()
 
     def _close(self) -> None:
         self._streaming = False
@@ -381,35 +328,9 @@ class Mcs1Driver(Driver):
             self._tap_event("close", port=self.port)
 
     # -- streaming -----------------------------------------------------------------
-    def _read_and_decode(
-        self, timeout: float | None, *, flush_idle: bool = False
-    ) -> FrameBlock | None:
-        """One read, decoded; frames go to the stash.
-
-        With ``flush_idle`` (waiting for a reply), a frame that stopped arriving is
-        flushed as truncated so that the reply behind it is not held back. While
-        streaming it is not: a device (or a simulator on a busy host) that pauses
-        within a frame sends the rest later, and a frame that really was truncated
-        is resolved by the frames after it (CRC failure, then resynchronisation).
-        """
-        data, t_ns = self._link.read(None if timeout is None else max(0.0, timeout))
-        block = self._decoder.feed(data, t_ns) if data else None
-        if data:
-            self._last_rx_ns = t_ns
-            self._rx_since_frame += len(data)
-        elif (
-            flush_idle and self._decoder.buffered and t_ns - self._last_rx_ns > self._idle_flush_ns
-        ):
-            block = self._decoder.flush()
-        if block is not None and len(block):
-            self._last_frame_ns = t_ns
-            self._rx_since_frame = 0
-            self._stash.append(block)
-        return block
-
     def _recv_internal(self, timeout: float | None) -> FrameBlock | None:
-        if self._stash:
-            return self._stash.pop(0)
+        if (kept := self._reader.pop()) is not None:
+            return kept
         if self._recovering is not None:
             self._recover(timeout)
             return None
@@ -422,37 +343,19 @@ class Mcs1Driver(Driver):
             self._begin_recovery("disconnected", asked)
             return None
         try:
-            self._read_and_decode(timeout)
+            self._reader.read(self._decoder, timeout)
         except DeviceDisconnected as exc:
             self._begin_recovery("disconnected", str(exc))
             return None
-        self._watch_events()
+        self._reader.log_events(self._decoder)
         now = time.monotonic_ns()
         if self._decoder.banner_seen:
             self._decoder.banner_seen = False
             self._begin_recovery("device_reset", "the device sent its reset banner")
-        elif now - self._last_frame_ns > self._silence_ns and (
-            now - self._last_rx_ns > self._silence_ns
-            or self._rx_since_frame > self._garbage_bytes
-            or now - self._last_frame_ns > 4 * self._silence_ns
-        ):
-            # Silence, or bytes that hold no frame. A host that was itself held up
-            # (a busy machine) finds the frames waiting for it: that is no fault.
-            self._begin_recovery(
-                "device_reset", f"no valid frame for {(now - self._last_frame_ns) / 1e9:.2f} s"
-            )
-        return self._stash.pop(0) if self._stash else None
-
-    def _watch_events(self) -> None:
-        """Replies that arrive while streaming (none are expected): log them."""
-        for event in self._decoder.take_events():
-            try:
-                reply = parse_reply(event.payload)
-            except ProtocolError as exc:
-                log.warning("%s: unexpected event frame: %s", self.port, exc)
-                continue
-            level = logging.WARNING if reply.kind in ("error", "warn") else logging.INFO
-            log.log(level, "%s: device sent %r while streaming", self.port, reply.text)
+        elif (silence := self._reader.fault(now)) is not None:
+            # Silence, or bytes that hold no frame.
+            self._begin_recovery("device_reset", silence)
+        return self._reader.pop()
 
     # -- recovery ------------------------------------------------------------------
     def _begin_recovery(self, kind: LinkEventKind, reason: str) -> None:
