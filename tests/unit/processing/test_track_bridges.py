@@ -47,7 +47,7 @@ def _frame(
     )
 
 
-def _pass(labelled: dict[int, range], after: int | None = None) -> PassResult:
+def _pass(labelled: dict[int, list[int]], after: int | None = None) -> PassResult:
     """Marker 0 on trajectory 7 throughout, labelled in the frames ``labelled[0]``,
     unlabelled (a loose point of trajectory 7) elsewhere; with ``after``, trajectory 7
     is labelled as marker 1 from that frame on (it passed to marker 1's blobs)."""
@@ -70,13 +70,18 @@ def _pass(labelled: dict[int, range], after: int | None = None) -> PassResult:
     return PassResult(points, np.where(np.isfinite(points[..., 0]), 0.1, np.nan), tracks=log)
 
 
+def _log(one: PassResult) -> TrackLog:
+    assert one.tracks is not None
+    return one.tracks
+
+
 def test_a_gap_on_one_trajectory_is_filled_between_its_labels() -> None:
     one = _pass({0: [0, 1, 2, 3, 9, 10, 11]})
     joined = one.points.copy()
     residual = one.residual_px.copy()
     closed = np.zeros((F, M), dtype=bool)
     closed[5, 0] = True
-    filled = bridge_labels(joined, residual, one.points, one.tracks, closed, AGREE_MM)
+    filled = bridge_labels(joined, residual, one.points, _log(one), closed, AGREE_MM)
     assert np.flatnonzero(filled[:, 0]).tolist() == [4, 6, 7, 8]
     assert not filled[:, 1:].any()
     assert np.allclose(joined[[4, 6, 7, 8], 0], _truth()[[4, 6, 7, 8], 0])
@@ -88,12 +93,12 @@ def test_no_fill_past_the_last_label_or_across_two_markers() -> None:
     joined = tail.points.copy()
     none = np.zeros((F, M), dtype=bool)
     assert not bridge_labels(
-        joined, tail.residual_px.copy(), tail.points, tail.tracks, none, AGREE_MM
+        joined, tail.residual_px.copy(), tail.points, _log(tail), none, AGREE_MM
     ).any()
     swapped = _pass({0: [0, 1, 2]}, after=8)  # labelled 0, then 1: whose it is is unknown
     joined = swapped.points.copy()
     assert not bridge_labels(
-        joined, swapped.residual_px.copy(), swapped.points, swapped.tracks, none, AGREE_MM
+        joined, swapped.residual_px.copy(), swapped.points, _log(swapped), none, AGREE_MM
     ).any()
 
 
@@ -138,7 +143,8 @@ def test_a_landing_crouch_the_model_never_saw_keeps_its_labels() -> None:
     h = round(X.shape[0] / 2)
     model = MarkerModel.infer(JUMP_MARKERS, X[:h])
     scene = trial_scene(X, JUMP_MARKERS, trial.point_rate, seed=2)
-    frames = [(scene.frames[f], None) for f in range(h, len(scene))]
+    none = np.zeros(len(scene.rig), dtype=bool)  # no camera flagged unusable
+    frames = [(scene.frames[f], none) for f in range(h, len(scene))]
     n = len(frames)
     usable, numbers = np.ones(n, dtype=bool), np.arange(n)
     forward = identify_pass(scene.rig, model, frames, usable, numbers, range(n))
