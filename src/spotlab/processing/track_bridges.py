@@ -2,9 +2,10 @@
 
 Live, a label lost by the model's checks (a skin marker whose distances leave the ranges
 the model learnt, in a posture the learning trial never reached) stays lost until the
-marker's cluster or links give it again; the track under it goes on, unlabelled. The
-unit commercial systems label offline is the trajectory, not the frame: a trajectory
-keeps one label along its length. :func:`bridge_labels` does that for a pass: a
+marker's cluster or links give it again; the track under it goes on, unlabelled.
+Offline, the unit to label is the trajectory (the path of one marker; Qualisys's QTM
+labels trajectories so, docs/identification.md gives the source), not the frame: a
+trajectory keeps one label along its length. :func:`bridge_labels` does that for a pass: a
 trajectory (:attr:`~spotlab.reconstruction.identification.tracking.Tracks.ident`: one
 number for as long as the identifier has no reason to doubt the track stays on one
 marker) that the joined labels put on marker ``m``, and on no other marker, anywhere
