@@ -2,7 +2,8 @@
 
 Correspondence between cameras (:mod:`.correspondence`), tracking in time
 (:mod:`.tracking`), labels from a marker model of rigid clusters and distance links
-(:mod:`.model`, :mod:`.labelling`), all driven frame by frame by :class:`Identifier`.
+(:mod:`.model`, :mod:`.labelling`, :mod:`.link_labels`), all driven frame by frame by
+:class:`Identifier`.
 Methods and measured figures: ``docs/identification.md``.
 """
 

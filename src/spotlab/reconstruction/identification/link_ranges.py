@@ -3,7 +3,7 @@
 Markers on no rigid cluster, and cluster markers while their cluster has fewer than
 three points, are labelled by the ranges of their distances to labelled partners
 (:class:`.model.Link`, segment mates). These are the checks
-:mod:`.labelling` runs for that: one marker against candidate points
+:mod:`.link_labels` runs for that: one marker against candidate points
 (:func:`link_fit`), every marker against the free points (:func:`fit_counts`), and
 the labels taken together in one round against their cluster distances
 (:func:`agreeing_labels`). Distances in mm.
@@ -78,7 +78,7 @@ def fit_counts(
 def agreeing_labels(
     model: MarkerModel, points: FloatArray, rows: IntArray, markers: IntArray, tol_mm: float
 ) -> NDArray[np.bool_]:
-    """Which of the labels :func:`.labelling._linked_labels` takes in one round (marker
+    """Which of the labels :func:`.link_labels.linked_labels` takes in one round (marker
     ``markers[n]`` on point ``rows[n]``, shape (N,)) to keep, shape (N,).
 
     Each was judged against the markers labelled before, not against the others of its
