@@ -12,7 +12,9 @@ Two jobs, both on the 3-D points of one frame:
   distances within ``tol_mm``), and among those with the most markers the identity with
   the smallest RMS fit is chosen (:func:`choose_identity`; Woltring & Huiskes 1990:
   "one may use the rms fitting error to decide between candidate solutions"). A choice
-  whose runner-up is within ``margin_mm`` is ambiguous and not taken. Markers still
+  whose runner-up is within ``margin_mm`` is ambiguous and not taken, and so are two
+  clusters' best identities that take some of the same unlabelled points with RMS
+  within ``margin_mm`` of each other (two hands alike: :func:`_rivals`). Markers still
   missing after the segment fits (a marker on no rigid cluster, or a segment with fewer
   than three markers in view) are labelled by the distance ranges to their labelled
   partners (:class:`.model.Link`, segment mates), only where the point and the marker
@@ -203,7 +205,7 @@ def assign_labels(
     # free points near it: it is kept until another segment takes one of those.
     known: dict[int, tuple[tuple[float, IntArray] | None, IntArray]] = {}
     while pending:
-        best: tuple[float, int, IntArray] | None = None
+        offers: dict[int, tuple[float, IntArray]] = {}
         for s in pending:
             if s not in known:
                 known[s] = _segment_labels(
@@ -219,14 +221,19 @@ def assign_labels(
                     link_rounds,
                 )
             found = known[s][0]
-            if found is None:
-                continue
-            rms, rows = found
-            if rms <= rms_mm and (best is None or rms < best[0]):
-                best = (rms, s, rows)
-        if best is None:
+            if found is not None and found[0] <= rms_mm:
+                offers[s] = found
+        if not offers:
             break
-        _, s, rows = best
+        s = min(offers, key=lambda t: offers[t][0])  # the first of equal ones
+        rivals = _rivals(s, offers, out, margin_mm)
+        if rivals:
+            # Woltring's caveat across clusters: two clusters whose best identities take
+            # the same new points and fit about as well (two hands alike) both wait.
+            for t in (s, *rivals):
+                pending.remove(t)
+            continue
+        rows = offers[s][1]
         seg = model.segments[s]
         taken = []
         for p, k in enumerate(rows):
@@ -242,6 +249,38 @@ def assign_labels(
     if exchanged_labels(model, points, out, point_of, tol_mm, min_links, can):
         linked_labels(model, points, out, point_of, tol_mm, min_links, can)
     return out
+
+
+def _rivals(
+    s: int, offers: dict[int, tuple[float, IntArray]], labels: IntArray, margin_mm: float
+) -> list[int]:
+    """Segments whose offered identity takes some of the new points of segment ``s``'s
+    with an RMS within ``margin_mm`` of it.
+
+    Parameters
+    ----------
+    s : int
+        The segment with the smallest RMS among ``offers``.
+    offers : dict
+        Acceptable best identity ``(rms, point per marker or -1)`` of each segment
+        still pending.
+    labels : ndarray of int, shape (K,)
+        Labels of the frame's points so far (-1: unlabelled); only unlabelled points
+        count as shared (a segment's own labelled points are no contest).
+
+    Returns
+    -------
+    list of int
+        The rival segments (empty: ``s``'s identity may be taken).
+    """
+    rms, rows = offers[s]
+    new = rows[rows >= 0]
+    new = new[labels[new] < 0]
+    return [
+        t
+        for t, (other_rms, other_rows) in offers.items()
+        if t != s and other_rms - rms < margin_mm and np.isin(new, other_rows).any()
+    ]
 
 
 def _segment_labels(
