@@ -14,7 +14,8 @@ Two jobs, both on the 3-D points of one frame:
   "one may use the rms fitting error to decide between candidate solutions"). A choice
   whose runner-up is within ``margin_mm`` is ambiguous and not taken, and so are two
   clusters' best identities that take some of the same unlabelled points with RMS
-  within ``margin_mm`` of each other (two hands alike: :func:`_rivals`). Markers still
+  within ``margin_mm`` of each other (two hands alike: :func:`_rivals`), unless one of
+  them alone places every marker of its cluster. Markers still
   missing after the segment fits (a marker on no rigid cluster, or a segment with fewer
   than three markers in view) are labelled by the distance ranges to their labelled
   partners (:class:`.model.Link`, segment mates), only where the point and the marker
@@ -229,10 +230,14 @@ def assign_labels(
         rivals = _rivals(s, offers, out, margin_mm)
         if rivals:
             # Woltring's caveat across clusters: two clusters whose best identities take
-            # the same new points and fit about as well (two hands alike) both wait.
-            for t in (s, *rivals):
-                pending.remove(t)
-            continue
+            # the same new points and fit about as well (two hands alike) both wait,
+            # unless one alone places all its markers (the others leave one missing).
+            whole = [t for t in (s, *rivals) if (offers[t][1] >= 0).all()]
+            if len(whole) != 1:
+                for t in (s, *rivals):
+                    pending.remove(t)
+                continue
+            s = whole[0]
         rows = offers[s][1]
         seg = model.segments[s]
         taken = []

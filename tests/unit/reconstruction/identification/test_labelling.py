@@ -181,3 +181,19 @@ def test_two_clusters_alike_apart_each_take_their_own() -> None:
     kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
     out = assign_labels(model, points, np.full(6, -1, np.intp), anchors=anchors, **kw)
     np.testing.assert_array_equal(out, [3, 4, 5, 0, 1, 2])
+
+
+def test_of_two_clusters_alike_the_one_placing_all_its_markers_is_taken() -> None:
+    # read_NOTworking2.c3d: the right wrist (4 markers) fits the left hand's triangle on
+    # 3 of them as well as the left hand (3 markers) does on all of its own.
+    two, points = _two_hands()
+    hand = two.segments[0].coordinates
+    wrist = np.vstack([hand, [10.0, 20.0, 70.0]])
+    model = MarkerModel(
+        ("RA", "RB", "RC", "RD", "LA", "LB", "LC"),
+        (Segment("right", (0, 1, 2, 3), wrist), Segment("left", (4, 5, 6), hand)),
+        (),
+    )
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
+    out = assign_labels(model, points, np.full(3, -1, np.intp), **kw)
+    np.testing.assert_array_equal(out, [4, 5, 6])
