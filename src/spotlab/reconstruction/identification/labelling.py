@@ -37,7 +37,6 @@ from spotlab.reconstruction.identification.identity_trial import LinkRounds, Tri
 from spotlab.reconstruction.identification.link_labels import exchanged_labels, linked_labels
 from spotlab.reconstruction.identification.link_ranges import length
 from spotlab.reconstruction.identification.model import MarkerModel, Segment
-from spotlab.reconstruction.identification.twin_clusters import nearer_twin
 from spotlab.reconstruction.rigid import rigid_fit
 
 __all__ = ["assign_labels", "inconsistent_labels"]
@@ -152,7 +151,6 @@ def assign_labels(
     anchors: FloatArray | None = None,
     min_links: int = 3,
     linkable: NDArray[np.bool_] | None = None,
-    twins: dict[int, tuple[int, ...]] | None = None,
 ) -> IntArray:
     """Labels for the unlabelled points of one frame.
 
@@ -179,9 +177,6 @@ def assign_labels(
     linkable : ndarray of bool, shape (K,), optional
         Points that may take a label by distance ranges alone (default: all); the
         others still count as candidates (two leave a marker unlabelled).
-    twins : dict, optional
-        Twins of each segment that has any (:func:`.twin_clusters.twin_partners`): a
-        new identity nearer where a twin was last seen waits (:func:`.nearer_twin`).
 
     Returns
     -------
@@ -244,11 +239,6 @@ def assign_labels(
                 continue
             s = whole[0]
         rows = offers[s][1]
-        if twins and anchors is not None and s in twins:
-            centre = points[rows[rows >= 0]].mean(axis=0)
-            if nearer_twin(model, s, centre, anchors, point_of, twins[s]):
-                pending.remove(s)
-                continue
         seg = model.segments[s]
         taken = []
         for p, k in enumerate(rows):

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from spotlab.reconstruction.identification.link_ranges import length
 from spotlab.reconstruction.identification.model import MarkerModel
 
-__all__ = ["nearer_twin", "refuted_twins", "twin_partners", "twin_segments"]
+__all__ = ["refuted_twins", "twin_segments"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -49,63 +49,13 @@ def twin_segments(model: MarkerModel, tol_mm: float) -> tuple[int, ...]:
     tuple of int
         Indices of the segments (in ``model.segments``) with a twin, in order.
     """
-    return tuple(sorted(twin_partners(model, tol_mm)))
-
-
-def twin_partners(model: MarkerModel, tol_mm: float) -> dict[int, tuple[int, ...]]:
-    """The twins of each segment that has any (:func:`twin_segments`), in order."""
     shapes = [_triangles(seg.coordinates) for seg in model.segments]
-    twins: dict[int, list[int]] = {}
+    twins: set[int] = set()
     for a, b in combinations(range(len(shapes)), 2):
         d = np.abs(shapes[a][:, None] - shapes[b][None])  # (Ta, Tb, 3)
         if (d <= tol_mm).all(axis=2).any():
-            twins.setdefault(a, []).append(b)
-            twins.setdefault(b, []).append(a)
-    return {s: tuple(sorted(t)) for s, t in sorted(twins.items())}
-
-
-def nearer_twin(
-    model: MarkerModel,
-    s: int,
-    centre: FloatArray,
-    anchors: FloatArray,
-    point_of: IntArray,
-    partners: tuple[int, ...],
-) -> bool:
-    """Whether a new identity of segment ``s`` with none of its markers labelled lies
-    nearer where one of its twins was last seen than where ``s`` was.
-
-    Parameters
-    ----------
-    model : MarkerModel
-    s : int
-        The segment.
-    centre : ndarray, shape (3,)
-        Mean of the points the identity takes (mm).
-    anchors : ndarray, shape (S, 3)
-        Last known centre of each segment (mm), NaN where unknown.
-    point_of : ndarray of int, shape (M,)
-        Point labelled as each marker in this frame, or -1.
-    partners : tuple of int
-        The twins of ``s`` (:func:`twin_partners`).
-
-    Returns
-    -------
-    bool
-        True where ``s`` has no labelled marker, both anchors are known, and the twin,
-        with no labelled marker either, was last seen nearer ``centre``: two clusters
-        alike are told apart by where each was last seen, as a body's two hands or
-        feet do not exchange places unseen.
-    """
-    if (point_of[list(model.segments[s].markers)] >= 0).any() or np.isnan(anchors[s]).any():
-        return False
-    own = float(np.linalg.norm(centre - anchors[s]))
-    for t in partners:
-        if (point_of[list(model.segments[t].markers)] >= 0).any() or np.isnan(anchors[t]).any():
-            continue
-        if float(np.linalg.norm(centre - anchors[t])) < own:
-            return True
-    return False
+            twins.update((a, b))
+    return tuple(sorted(twins))
 
 
 def _triangles(coords: FloatArray) -> FloatArray:
