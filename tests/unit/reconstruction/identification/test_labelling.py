@@ -10,6 +10,7 @@ import pytest
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction.identification import Link, MarkerModel, Segment
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
+from spotlab.reconstruction.identification.twin_clusters import twin_partners
 from spotlab.testing.centroid_scene import CentroidScene
 
 TRUNK = {"HEAD", "C7", "LASI", "RASI", "SACR", "LPSI", "RPSI", "LFHD", "RFHD"}
@@ -197,3 +198,24 @@ def test_of_two_clusters_alike_the_one_placing_all_its_markers_is_taken() -> Non
     kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
     out = assign_labels(model, points, np.full(3, -1, np.intp), **kw)
     np.testing.assert_array_equal(out, [4, 5, 6])
+
+
+def test_a_twin_kept_off_by_its_anchor_still_refuses_points_it_fits_better() -> None:
+    # read_NOTworking2.c3d: the right hand unseen for seconds, its anchor far; its points
+    # are tried for the left hand only, whose triangle fits them 2 mm worse.
+    right, points = _two_hands()
+    hand = right.segments[0].coordinates
+    left = hand * [1.04, 1.0, 1.0]  # alike within the tree's 5 mm, not the same
+    model = MarkerModel(
+        ("LA", "LB", "LC", "RA", "RB", "RC"),
+        (Segment("left", (0, 1, 2), left), Segment("right", (3, 4, 5), hand)),
+        (),
+    )
+    anchors = np.array([points.mean(0), points.mean(0) + np.array([0.0, 0.0, 900.0])])
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0, "anchors": anchors}
+    taken = assign_labels(model, points, np.full(3, -1, np.intp), **kw)
+    assert (taken >= 0).all()  # without the twins, the left hand takes them
+    twins = twin_partners(model, 5.0)
+    assert twins == {0: (1,), 1: (0,)}
+    out = assign_labels(model, points, np.full(3, -1, np.intp), twins=twins, **kw)
+    assert (out == -1).all()
