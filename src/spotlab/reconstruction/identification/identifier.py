@@ -23,9 +23,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from spotlab.core.errors import CalibrationError, ReconstructionError
+from spotlab.core.errors import ReconstructionError
 from spotlab.geometry import Rig
 from spotlab.reconstruction.identification.blobs import BlobFrame
+from spotlab.reconstruction.identification.calibration_check import CalibrationCheck
 from spotlab.reconstruction.identification.correspondence import match_blobs
 from spotlab.reconstruction.identification.crossed_rays import crossed_rays
 from spotlab.reconstruction.identification.duplicate_tracks import duplicate_tracks
@@ -39,6 +40,10 @@ from spotlab.reconstruction.identification.identified_frame import (
 )
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
 from spotlab.reconstruction.identification.model import MarkerModel
+from spotlab.reconstruction.identification.reference_pairs import (
+    exchanged_references,
+    reference_pairs,
+)
 from spotlab.reconstruction.identification.tracking import Tracks, associate
 from spotlab.reconstruction.identification.twin_clusters import refuted_twins, twin_partners
 
@@ -124,16 +129,15 @@ class Identifier:
         self.max_blobs, self.check_frames = max_blobs, check_frames
         self.apart_mm = apart_mm
         self.tracks = Tracks()
-        C, S = len(rig), len(model.segments)
+        S = len(model.segments)
         self._anchors = np.full((S, 3), np.nan)
         self._segment_of = model.segment_of
         _ = model.partners, model.directed  # the model's lookup tables, built before frames
         self._points = np.full((len(model.labels), 3), np.nan)  # labelled points (checks)
         self._twin_partners = twin_partners(model, tol_mm)
         self._twins = tuple(self._twin_partners)
-        self._offered = np.zeros(C)
-        self._confirmed = np.zeros(C)
-        self._frames = 0
+        self._pairs = reference_pairs(model)
+        self._check_calibration = CalibrationCheck(rig, check_frames)
         self._crossed = np.zeros(0, dtype=bool)  # per track (:mod:`.crossed_rays`)
 
     def __call__(
@@ -334,6 +338,8 @@ class Identifier:
             changed = self._check_twins()
         if self.model.sides[0].size:
             self._check_handedness(refill=changed)
+        if self._pairs:
+            self._check_pairs()
         self._update_anchors()
 
     def _check_twins(self) -> bool:
@@ -359,6 +365,17 @@ class Identifier:
             points[tracks.label[lab]] = tracks.position[lab]
         self._unlabel(misplaced_segments(self.model.segment_arrays, self.model.sides, points))
 
+    def _check_pairs(self) -> None:
+        """Exchange the labels of two link-only markers a cluster's references say are
+        the wrong way round (:func:`.reference_pairs.exchanged_references`)."""
+        tracks, points = self.tracks, self._points
+        lab = (tracks.label >= 0) & (tracks.missed == 0)
+        points.fill(np.nan)
+        points[tracks.label[lab]] = tracks.position[lab]
+        for m, n in exchanged_references(self.model, self._pairs, points):
+            a, b = lab & (tracks.label == m), lab & (tracks.label == n)
+            tracks.label[a], tracks.label[b] = n, m
+
     def _unlabel(self, drop: NDArray[np.bool_]) -> bool:
         """Unlabel the seen tracks of the markers ``drop`` (M,); True if any was."""
         if drop.any():
@@ -381,34 +398,6 @@ class Identifier:
         )
         with np.errstate(invalid="ignore", divide="ignore"):
             self._anchors = np.where((n > 0)[:, None], total / n[:, None], self._anchors)
-
-    def _check_calibration(
-        self, camera: IntArray, usable: NDArray[np.bool_], used: NDArray[np.bool_]
-    ) -> None:
-        if self.check_frames <= 0:
-            return
-        C = len(self.geom)
-        self._offered += np.bincount(camera[usable], minlength=C)
-        self._confirmed += np.bincount(camera[usable & used], minlength=C)
-        self._frames += 1
-        if self._frames < self.check_frames:
-            return
-        offered, confirmed = self._offered, self._confirmed
-        self._offered, self._confirmed, self._frames = np.zeros(C), np.zeros(C), 0
-        busy = offered >= 5 * self.check_frames  # cameras that saw markers
-        with np.errstate(invalid="ignore", divide="ignore"):
-            share = confirmed / offered
-        bad = busy & (share < 0.2)
-        if bad.any():
-            names = [self.geom.rig[int(c)].name or f"camera {c}" for c in np.flatnonzero(bad)]
-            raise CalibrationError(
-                "the calibration does not match the cameras: "
-                + ", ".join(
-                    f"{n} ({100 * share[c]:.0f} % of blobs confirmed)"
-                    for n, c in zip(names, np.flatnonzero(bad), strict=True)
-                )
-                + f" over {self.check_frames} frames (cameras swapped, moved, or another rig?)"
-            )
 
     def _result(self, flags: IntArray) -> IdentifiedFrame:
         tracks = self.tracks
