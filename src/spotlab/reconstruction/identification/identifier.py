@@ -45,7 +45,7 @@ from spotlab.reconstruction.identification.reference_pairs import (
     reference_pairs,
 )
 from spotlab.reconstruction.identification.tracking import Tracks, associate
-from spotlab.reconstruction.identification.twin_clusters import refuted_twins, twin_segments
+from spotlab.reconstruction.identification.twin_clusters import refuted_twins, twin_partners
 
 __all__ = ["Identifier"]
 
@@ -134,7 +134,8 @@ class Identifier:
         self._segment_of = model.segment_of
         _ = model.partners, model.directed  # the model's lookup tables, built before frames
         self._points = np.full((len(model.labels), 3), np.nan)  # labelled points (checks)
-        self._twins = twin_segments(model, tol_mm)
+        self._twin_partners = twin_partners(model, tol_mm)
+        self._twins = tuple(self._twin_partners)
         self._pairs = reference_pairs(model)
         self._check_calibration = CalibrationCheck(rig, check_frames)
         self._crossed = np.zeros(0, dtype=bool)  # per track (:mod:`.crossed_rays`)
@@ -322,6 +323,7 @@ class Identifier:
                 margin_mm=self.margin_mm,
                 anchors=self._anchors,
                 linkable=~self._crossed[rows],
+                twins=self._twin_partners,
             )
             new = rows[(labels >= 0) & (tracks.label[rows] < 0)]
             if new.size:

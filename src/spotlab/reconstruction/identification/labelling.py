@@ -12,7 +12,11 @@ Two jobs, both on the 3-D points of one frame:
   distances within ``tol_mm``), and among those with the most markers the identity with
   the smallest RMS fit is chosen (:func:`choose_identity`; Woltring & Huiskes 1990:
   "one may use the rms fitting error to decide between candidate solutions"). A choice
-  whose runner-up is within ``margin_mm`` is ambiguous and not taken. Markers still
+  whose runner-up is within ``margin_mm`` is ambiguous and not taken, and so are two
+  clusters' best identities that take some of the same unlabelled points with RMS
+  within ``margin_mm`` of each other, unless one of them alone places every marker of
+  its cluster, or that a twin fits better (two hands alike: :mod:`.rival_clusters`).
+  Markers still
   missing after the segment fits (a marker on no rigid cluster, or a segment with fewer
   than three markers in view) are labelled by the distance ranges to their labelled
   partners (:class:`.model.Link`, segment mates), only where the point and the marker
@@ -34,6 +38,7 @@ from spotlab.reconstruction.identification.identity_trial import LinkRounds, Tri
 from spotlab.reconstruction.identification.link_labels import exchanged_labels, linked_labels
 from spotlab.reconstruction.identification.link_ranges import length
 from spotlab.reconstruction.identification.model import MarkerModel, Segment
+from spotlab.reconstruction.identification.rival_clusters import Offer, rivals, twin_leads
 from spotlab.reconstruction.rigid import rigid_fit
 
 __all__ = ["assign_labels", "inconsistent_labels"]
@@ -148,6 +153,7 @@ def assign_labels(
     anchors: FloatArray | None = None,
     min_links: int = 3,
     linkable: NDArray[np.bool_] | None = None,
+    twins: dict[int, tuple[int, ...]] | None = None,
 ) -> IntArray:
     """Labels for the unlabelled points of one frame.
 
@@ -174,6 +180,10 @@ def assign_labels(
     linkable : ndarray of bool, shape (K,), optional
         Points that may take a label by distance ranges alone (default: all); the
         others still count as candidates (two leave a marker unlabelled).
+    twins : dict, optional
+        Twins of each segment that has any (:func:`.twin_clusters.twin_partners`): a
+        new identity a twin fits better, the twin's anchor aside, waits
+        (:func:`.rival_clusters.twin_leads`).
 
     Returns
     -------
@@ -198,12 +208,16 @@ def assign_labels(
             if not linked_labels(model, points, lab, where, tol_mm, min_links, can):
                 break
 
+    def anywhere(t: int) -> Offer | None:  # segment t's best identity, its anchor aside
+        args = (tol_mm, margin_mm, near_mm, None, link_rounds)
+        return _segment_labels(model, t, points, out, point_of, *args)[0]
+
     pending = list(range(len(model.segments)))
     # A segment's best assignment depends only on its own markers' points and on the
     # free points near it: it is kept until another segment takes one of those.
     known: dict[int, tuple[tuple[float, IntArray] | None, IntArray]] = {}
     while pending:
-        best: tuple[float, int, IntArray] | None = None
+        offers: dict[int, Offer] = {}
         for s in pending:
             if s not in known:
                 known[s] = _segment_labels(
@@ -219,14 +233,28 @@ def assign_labels(
                     link_rounds,
                 )
             found = known[s][0]
-            if found is None:
-                continue
-            rms, rows = found
-            if rms <= rms_mm and (best is None or rms < best[0]):
-                best = (rms, s, rows)
-        if best is None:
+            if found is not None and found[0] <= rms_mm:
+                offers[s] = found
+        if not offers:
             break
-        _, s, rows = best
+        s = min(offers, key=lambda t: offers[t][0])  # the first of equal ones
+        others = rivals(s, offers, out, margin_mm)
+        if others:
+            # Woltring's caveat across clusters: two clusters whose best identities take
+            # the same new points and fit about as well (two hands alike) both wait,
+            # unless one alone places all its markers (the others leave one missing).
+            whole = [t for t in (s, *others) if (offers[t][1] >= 0).all()]
+            if len(whole) != 1:
+                for t in (s, *others):
+                    pending.remove(t)
+                continue
+            s = whole[0]
+        rows = offers[s][1]
+        if twins and s in twins and not (point_of[list(model.segments[s].markers)] >= 0).any():
+            waiting = [t for t in twins[s] if t in pending]
+            if twin_leads(offers[s], out, margin_mm, waiting, anywhere):
+                pending.remove(s)  # the anchors kept its twin off points it fits better
+                continue
         seg = model.segments[s]
         taken = []
         for p, k in enumerate(rows):

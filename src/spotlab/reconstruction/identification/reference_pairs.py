@@ -15,44 +15,77 @@ their labels are exchanged (:func:`exchanged_references`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.reconstruction.identification.model import MarkerModel
-from spotlab.reconstruction.rigid import rigid_fit
 
-__all__ = ["exchanged_references", "reference_pairs"]
+__all__ = ["ClusterPairs", "exchanged_references", "reference_pairs"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-#: Per cluster: its index and the pairs (k, 2) of its references (indices into
-#: :attr:`.MarkerModel.references`) whose markers are on no cluster.
-PairTable = tuple[tuple[int, IntArray], ...]
+
+@dataclass(frozen=True)
+class ClusterPairs:
+    """The link-only references of one cluster that form pairs, as arrays.
+
+    Attributes
+    ----------
+    segment : int
+        Index of the cluster in :attr:`.MarkerModel.segments`.
+    marker : ndarray of int, shape (U,)
+        The references' markers.
+    axes : ndarray, shape (U, 3)
+        Their cones' axes in the cluster's frame.
+    spread : ndarray, shape (U,)
+        Their cones' half-angles (degrees).
+    first, second : ndarray of int, shape (k,)
+        The pairs, as rows of the arrays above.
+    """
+
+    segment: int
+    marker: IntArray
+    axes: FloatArray
+    spread: FloatArray
+    first: IntArray
+    second: IntArray
 
 
-def reference_pairs(model: MarkerModel) -> PairTable:
+def reference_pairs(model: MarkerModel) -> tuple[ClusterPairs, ...]:
     """The pairs of link-only references of each cluster (built once per model)."""
     owner = model.segment_of
-    out = []
     refs = model.references
+    out = []
     for s in sorted({r.segment for r in refs}):
-        loose = [k for k, r in enumerate(refs) if r.segment == s and owner[r.marker] < 0]
-        pairs = [(a, b) for i, a in enumerate(loose) for b in loose[i + 1 :]]
-        if pairs:
-            out.append((s, np.array(pairs, dtype=np.intp)))
+        loose = [r for r in refs if r.segment == s and owner[r.marker] < 0]
+        if len(loose) < 2:
+            continue
+        first, second = np.triu_indices(len(loose), k=1)
+        out.append(
+            ClusterPairs(
+                s,
+                np.array([r.marker for r in loose], dtype=np.intp),
+                np.array([r.direction for r in loose]),
+                np.array([r.spread_deg for r in loose]),
+                first.astype(np.intp),
+                second.astype(np.intp),
+            )
+        )
     return tuple(out)
 
 
 def exchanged_references(
-    model: MarkerModel, table: PairTable, points: FloatArray
+    model: MarkerModel, table: tuple[ClusterPairs, ...], points: FloatArray
 ) -> list[tuple[int, int]]:
     """Pairs of labelled link-only markers whose labels are the wrong way round.
 
     Parameters
     ----------
     model : MarkerModel
-    table : PairTable
+    table : tuple of ClusterPairs
         :func:`reference_pairs` of ``model``.
     points : ndarray, shape (M, 3)
         Labelled points of one frame in model order (mm), NaN where missing.
@@ -66,28 +99,40 @@ def exchanged_references(
         A marker in two such pairs is left as it is.
     """
     found: list[tuple[int, int]] = []
-    refs = model.references
-    for s, pairs in table:
-        markers, coords = model.segment_arrays[s]
+    for c in table:
+        held = np.isfinite(points[c.marker, 0])
+        if not (held[c.first] & held[c.second]).any():
+            continue  # no pair with both markers labelled
+        markers, coords = model.segment_arrays[c.segment]
         observed = points[markers]
-        if np.isfinite(observed[:, 0]).sum() < 3:
+        seen = np.isfinite(observed[:, 0])
+        if seen.sum() < 3:
             continue
-        R, t, _ = rigid_fit(coords, observed[None])
-        if not np.isfinite(R).all():
-            continue
-        for a, b in pairs:
-            ra, rb = refs[a], refs[b]
-            p, q = points[ra.marker], points[rb.marker]
-            if not (np.isfinite(p).all() and np.isfinite(q).all()):
-                continue
-            local = (np.stack([p, q]) - t[0]) @ R[0]  # rows: R^T (x - t)
+        R, t = _pose(coords[seen], observed[seen])
+        local = (points[c.marker] - t) @ R  # rows: R^T (x - t)
+        with np.errstate(invalid="ignore", divide="ignore"):
             u = local / np.linalg.norm(local, axis=1, keepdims=True)
-            axes = np.stack([ra.direction, rb.direction])
-            cos = np.clip(u @ axes.T, -1.0, 1.0)  # [point, axis]
-            angle = np.degrees(np.arccos(cos))
-            own = angle[0, 0] + angle[1, 1]
-            exchanged = angle[1, 0] + angle[0, 1]
-            if own - exchanged > max(ra.spread_deg, rb.spread_deg):
-                found.append((ra.marker, rb.marker))
+        angle = np.degrees(np.arccos(np.clip(u @ c.axes.T, -1.0, 1.0)))  # [point, axis]
+        i, j = c.first, c.second
+        own = angle[i, i] + angle[j, j]
+        exchanged = angle[j, i] + angle[i, j]
+        with np.errstate(invalid="ignore"):
+            hit = own - exchanged > np.maximum(c.spread[i], c.spread[j])  # False where NaN
+        if hit.any():
+            found.extend(zip(c.marker[i[hit]].tolist(), c.marker[j[hit]].tolist(), strict=True))
+    if not found:
+        return found
     count = np.bincount(np.array(found, dtype=np.intp).ravel(), minlength=len(model.labels))
     return [(m, n) for m, n in found if count[m] == 1 and count[n] == 1]
+
+
+def _pose(model: FloatArray, observed: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Least-squares rotation (3, 3) and translation (3,) with ``observed ~ R @ model + t``
+    for matched points (P, 3), P >= 3 (Kabsch; one frame, every check spared: this runs
+    every frame for every cluster with a pair)."""
+    a, b = model.mean(axis=0), observed.mean(axis=0)
+    U, _, Vt = np.linalg.svd((model - a).T @ (observed - b))
+    if np.linalg.det(Vt.T @ U.T) < 0:
+        Vt[-1] *= -1.0
+    R = Vt.T @ U.T
+    return R, b - R @ a

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from spotlab.reconstruction.identification.link_ranges import length
 from spotlab.reconstruction.identification.model import MarkerModel
 
-__all__ = ["refuted_twins", "twin_segments"]
+__all__ = ["refuted_twins", "twin_partners", "twin_segments"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -49,13 +49,19 @@ def twin_segments(model: MarkerModel, tol_mm: float) -> tuple[int, ...]:
     tuple of int
         Indices of the segments (in ``model.segments``) with a twin, in order.
     """
+    return tuple(sorted(twin_partners(model, tol_mm)))
+
+
+def twin_partners(model: MarkerModel, tol_mm: float) -> dict[int, tuple[int, ...]]:
+    """The twins of each segment that has any (:func:`twin_segments`), in order."""
     shapes = [_triangles(seg.coordinates) for seg in model.segments]
-    twins: set[int] = set()
+    twins: dict[int, list[int]] = {}
     for a, b in combinations(range(len(shapes)), 2):
         d = np.abs(shapes[a][:, None] - shapes[b][None])  # (Ta, Tb, 3)
         if (d <= tol_mm).all(axis=2).any():
-            twins.update((a, b))
-    return tuple(sorted(twins))
+            twins.setdefault(a, []).append(b)
+            twins.setdefault(b, []).append(a)
+    return {s: tuple(sorted(t)) for s, t in sorted(twins.items())}
 
 
 def _triangles(coords: FloatArray) -> FloatArray:

@@ -10,6 +10,7 @@ import pytest
 from spotlab.core.errors import ReconstructionError
 from spotlab.reconstruction.identification import Link, MarkerModel, Segment
 from spotlab.reconstruction.identification.labelling import assign_labels, inconsistent_labels
+from spotlab.reconstruction.identification.twin_clusters import twin_partners
 from spotlab.testing.centroid_scene import CentroidScene
 
 TRUNK = {"HEAD", "C7", "LASI", "RASI", "SACR", "LPSI", "RPSI", "LFHD", "RFHD"}
@@ -147,3 +148,74 @@ def test_cluster_mates_labelled_together_by_links_keep_their_distance() -> None:
     # alone, the ankle's point is the ankle's
     out = assign_labels(_foot_model(), points[[0, 1, 2, 4]], np.array([3, 4, 5, -1], np.intp), **kw)
     assert out[3] == 0
+
+
+def _two_hands() -> tuple[MarkerModel, np.ndarray]:
+    """Two congruent (scalene) triangle clusters, L (markers 0-2) and R (3-5), as two
+    hands carry; and R's triangle turned and moved: R's points, which L fits as well."""
+    hand = np.array([[0.0, 0.0, 0.0], [90.0, 0.0, 0.0], [20.0, 65.0, 0.0]])
+    hand -= hand.mean(0)
+    model = MarkerModel(
+        ("LA", "LB", "LC", "RA", "RB", "RC"),
+        (Segment("left", (0, 1, 2), hand), Segment("right", (3, 4, 5), hand)),
+        (),
+    )
+    c, s = np.cos(0.7), np.sin(0.7)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return model, hand @ turn.T + [400.0, 200.0, 900.0]
+
+
+def test_two_clusters_alike_leave_their_shared_points_unlabelled() -> None:
+    # read_NOTworking2.c3d: the right hand's identity taken on the left hand's points.
+    # Each cluster's own choice has a clear lead; across the two clusters it has none.
+    model, points = _two_hands()
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
+    out = assign_labels(model, points, np.full(3, -1, np.intp), **kw)
+    assert (out == -1).all()
+
+
+def test_two_clusters_alike_apart_each_take_their_own() -> None:
+    model, right = _two_hands()
+    left = right + np.array([0.0, -800.0, 0.0])
+    points = np.vstack([right, left])
+    anchors = np.array([left.mean(0), right.mean(0)])  # where each was last seen
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
+    out = assign_labels(model, points, np.full(6, -1, np.intp), anchors=anchors, **kw)
+    np.testing.assert_array_equal(out, [3, 4, 5, 0, 1, 2])
+
+
+def test_of_two_clusters_alike_the_one_placing_all_its_markers_is_taken() -> None:
+    # read_NOTworking2.c3d: the right wrist (4 markers) fits the left hand's triangle on
+    # 3 of them as well as the left hand (3 markers) does on all of its own.
+    two, points = _two_hands()
+    hand = two.segments[0].coordinates
+    wrist = np.vstack([hand, [10.0, 20.0, 70.0]])
+    model = MarkerModel(
+        ("RA", "RB", "RC", "RD", "LA", "LB", "LC"),
+        (Segment("right", (0, 1, 2, 3), wrist), Segment("left", (4, 5, 6), hand)),
+        (),
+    )
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0}
+    out = assign_labels(model, points, np.full(3, -1, np.intp), **kw)
+    np.testing.assert_array_equal(out, [4, 5, 6])
+
+
+def test_a_twin_kept_off_by_its_anchor_still_refuses_points_it_fits_better() -> None:
+    # read_NOTworking2.c3d: the right hand unseen for seconds, its anchor far; its points
+    # are tried for the left hand only, whose triangle fits them 2 mm worse.
+    right, points = _two_hands()
+    hand = right.segments[0].coordinates
+    left = hand * [1.04, 1.0, 1.0]  # alike within the tree's 5 mm, not the same
+    model = MarkerModel(
+        ("LA", "LB", "LC", "RA", "RB", "RC"),
+        (Segment("left", (0, 1, 2), left), Segment("right", (3, 4, 5), hand)),
+        (),
+    )
+    anchors = np.array([points.mean(0), points.mean(0) + np.array([0.0, 0.0, 900.0])])
+    kw = {"tol_mm": 5.0, "rms_mm": 3.0, "margin_mm": 1.0, "anchors": anchors}
+    taken = assign_labels(model, points, np.full(3, -1, np.intp), **kw)
+    assert (taken >= 0).all()  # without the twins, the left hand takes them
+    twins = twin_partners(model, 5.0)
+    assert twins == {0: (1,), 1: (0,)}
+    out = assign_labels(model, points, np.full(3, -1, np.intp), twins=twins, **kw)
+    assert (out == -1).all()

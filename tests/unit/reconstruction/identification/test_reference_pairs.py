@@ -53,7 +53,8 @@ def _frame(model: MarkerModel, turn_deg: float) -> np.ndarray:
 def test_the_exchanged_pair_is_found_and_the_right_one_left() -> None:
     model = _model()
     table = reference_pairs(model)
-    assert len(table) == 1 and table[0][1].tolist() == [[0, 1]]
+    assert len(table) == 1 and table[0].marker.tolist() == [3, 4]
+    assert (table[0].first.tolist(), table[0].second.tolist()) == ([0], [1])
     for turn in (0.0, 35.0, -120.0):
         points = _frame(model, turn)
         assert exchanged_references(model, table, points) == []
