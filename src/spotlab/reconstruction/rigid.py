@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from spotlab.core.errors import ReconstructionError
 
-__all__ = ["RigidPose", "check_body_model", "rigid_fit", "rigid_pose"]
+__all__ = ["RigidPose", "check_body_model", "kabsch", "rigid_fit", "rigid_pose"]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -241,3 +241,18 @@ def rigid_fit(
     """
     pose = rigid_pose(model, observed, weights)
     return pose.R, pose.t, pose.rms
+
+
+def kabsch(model: FloatArray, observed: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Least-squares rotation (3, 3) and translation (3,), ``observed ~ R @ model + t``,
+    of matched points (P, 3) mm of one frame, all seen, P >= 3 not collinear.
+
+    The solution of :func:`rigid_pose` (its Notes) for one frame with equal weights,
+    without its checks: for loops that call it every frame on points they have checked.
+    """
+    a, b = model.mean(axis=0), observed.mean(axis=0)
+    U, _, Vt = np.linalg.svd((model - a).T @ (observed - b))
+    if np.linalg.det(Vt.T @ U.T) < 0:
+        Vt[-1] *= -1.0
+    R = Vt.T @ U.T
+    return R, b - R @ a

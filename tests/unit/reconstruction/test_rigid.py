@@ -150,3 +150,18 @@ def test_package_exports() -> None:
 
     for name in ("rigid_fit", "rigid_pose", "fit_body_to_images", "choose_identity"):
         assert name in rec.__all__ and callable(getattr(rec, name))
+
+
+def test_kabsch_is_rigid_fit_for_one_frame() -> None:
+    """The single-frame form gives rigid_fit's pose, noise and a flat body included
+    (where the best orthogonal matrix could be a reflection)."""
+    rng = np.random.default_rng(7)
+    flat = np.array([[0.0, 0, 0], [120, 0, 0], [40, 90, 0]])
+    for body in (rng.normal(size=(5, 3)) * 80.0, flat):
+        R0 = Rotation.random(random_state=3).as_matrix()
+        seen = body @ R0.T + [400.0, -50.0, 900.0] + rng.normal(scale=0.5, size=body.shape)
+        R, t = rigid.kabsch(body, seen)
+        R1, t1, _ = rigid_fit(body, seen[None])
+        assert_allclose(R, R1[0], atol=1e-9)
+        assert_allclose(t, t1[0], atol=1e-7)
+        assert np.linalg.det(R) == pytest.approx(1.0)

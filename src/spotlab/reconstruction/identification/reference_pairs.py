@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spotlab.reconstruction.identification.model import MarkerModel
+from spotlab.reconstruction.rigid import kabsch
 
 __all__ = ["ClusterPairs", "exchanged_references", "reference_pairs"]
 
@@ -108,7 +109,7 @@ def exchanged_references(
         seen = np.isfinite(observed[:, 0])
         if seen.sum() < 3:
             continue
-        R, t = _pose(coords[seen], observed[seen])
+        R, t = kabsch(coords[seen], observed[seen])
         local = (points[c.marker] - t) @ R  # rows: R^T (x - t)
         with np.errstate(invalid="ignore", divide="ignore"):
             u = local / np.linalg.norm(local, axis=1, keepdims=True)
@@ -124,15 +125,3 @@ def exchanged_references(
         return found
     count = np.bincount(np.array(found, dtype=np.intp).ravel(), minlength=len(model.labels))
     return [(m, n) for m, n in found if count[m] == 1 and count[n] == 1]
-
-
-def _pose(model: FloatArray, observed: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Least-squares rotation (3, 3) and translation (3,) with ``observed ~ R @ model + t``
-    for matched points (P, 3), P >= 3 (Kabsch; one frame, every check spared: this runs
-    every frame for every cluster with a pair)."""
-    a, b = model.mean(axis=0), observed.mean(axis=0)
-    U, _, Vt = np.linalg.svd((model - a).T @ (observed - b))
-    if np.linalg.det(Vt.T @ U.T) < 0:
-        Vt[-1] *= -1.0
-    R = Vt.T @ U.T
-    return R, b - R @ a
