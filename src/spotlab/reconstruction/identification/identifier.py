@@ -375,6 +375,7 @@ class Identifier:
         for m, n in exchanged_references(self.model, self._pairs, points):
             a, b = lab & (tracks.label == m), lab & (tracks.label == n)
             tracks.label[a], tracks.label[b] = n, m
+            tracks.age[a | b] = 0  # a label newly held
 
     def _unlabel(self, drop: NDArray[np.bool_]) -> bool:
         """Unlabel the seen tracks of the markers ``drop`` (M,); True if any was."""
